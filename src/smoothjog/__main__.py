@@ -1,0 +1,5 @@
+"""Allows `python -m smoothjog`."""
+
+from smoothjog.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Byte and line transports to a controller; they know nothing of jogging."""

@@ -1,0 +1,1 @@
+"""The faithful Grbl jog simulator: smoothjog's embedded default machine."""

@@ -1,0 +1,1 @@
+"""The web pendant: its server and its static page."""
