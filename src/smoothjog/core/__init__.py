@@ -1,1 +1,1 @@
-"""The pure core: protocol grammar, machine model and jog math; no I/O, no asyncio, no clock reads."""
+"""The pure core: grammar, machine model and jog math; no I/O, no asyncio, no clock reads."""
