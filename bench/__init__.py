@@ -1,0 +1,1 @@
+"""smoothjog's benchmarks: jog quality against the physical limits and the reference methods."""

@@ -1,0 +1,40 @@
+"""`python -m bench [jog|fuzz|micro|sim] [options]`: smoothjog's benchmark commands."""
+
+from __future__ import annotations
+
+import sys
+
+
+def main() -> int:
+    """Dispatch to a benchmark; with no name, run jog, micro and sim."""
+    args = sys.argv[1:]
+    name = args[0] if args and not args[0].startswith("-") else "all"
+    rest = args[1:] if name != "all" else args
+    if name == "jog":
+        from bench import jog
+
+        return jog.main(rest)
+    if name == "fuzz":
+        from bench import fuzz
+
+        return fuzz.main(rest)
+    if name == "micro":
+        from bench import micro
+
+        return micro.main(rest)
+    if name == "sim":
+        from bench import bench_sim_speed
+
+        return bench_sim_speed.main()
+    if name == "all":
+        from bench import bench_sim_speed, jog, micro
+
+        code = jog.main(rest)
+        code |= micro.main([])
+        code |= bench_sim_speed.main()
+        return code
+    print(f"unknown benchmark {name!r}: use jog, fuzz, micro or sim", file=sys.stderr)
+    return 2
+
+
+raise SystemExit(main())

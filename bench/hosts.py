@@ -1,0 +1,270 @@
+"""The four reference jog methods, each built from its published description, plus smoothjog.
+
+Every host keeps the contract of `smoothjog.vsession.JogHost` (set_intent, on_response, poll,
+next_deadline_s, busy) so the same scenarios drive them all on the same simulator. The reference
+methods are written as their authors describe them, flaws included; none of them is smoothjog.
+
+- PendantPost150: the pendant post's smooth multi-axis jogging: a `$J=G91` increment worth 150 ms
+  of travel every 150 ms (the second one after 100 ms), axis speeds split by the ratio diagonal,
+  F = the largest ratio times the speed; no jog cancel: on release it simply stops sending.
+- WikiJog(corrected=False): Grbl's jogging doc: one short G91 jog at a time, the next sent on each
+  `ok`, `dt = v²/(2a(N−1))` exactly as printed (v in mm/s, a the smallest axis acceleration, at
+  least 10 ms), and 0x85 as soon as the stick returns to neutral.
+- WikiJog(corrected=True): the same with the dimensionally correct `dt = v/(2a(N−1))`.
+- LongJog: one jog to the edge of the travel, cancelled with 0x85 on release (what many senders do).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from smoothjog.core.jogger import (
+    ContinuousIntent,
+    EngineLimits,
+    Intent,
+    Jogger,
+    JogTuning,
+    Output,
+    SendLine,
+    SendRealtime,
+)
+from smoothjog.core.jogline import build_jog_line
+from smoothjog.core.machine import MachineModel
+from smoothjog.core.responses import ErrorReply, Ok, Response
+from smoothjog.core.units import mm_min_to_mm_s
+
+JOG_CANCEL = b"\x85"
+
+
+class _Host:
+    """Shared plumbing: the machine model, character counting, and the held stick."""
+
+    #: The host's own send cycle, used to place releases at several phases of it.
+    cycle_s = 0.010
+    name = "host"
+
+    def __init__(self, model: MachineModel) -> None:
+        self.model = model
+        self.limits = EngineLimits.from_model(model)
+        self.max_feed_mm_min = max(self.limits.max_rate_mm_min)
+        self.stick: ContinuousIntent | None = None
+        self._pending: deque[str] = deque()
+        self._pending_bytes = 0
+        self.outbox: list[Output] = []
+
+    # JogHost -----------------------------------------------------------------------------
+    def set_intent(self, intent: Intent, now_s: float) -> None:
+        """Take the stick; reference methods know only continuous jogging."""
+        if isinstance(intent, ContinuousIntent) and not intent.is_neutral():
+            self.press(intent, now_s)
+        else:
+            self.release(now_s)
+
+    def on_response(self, resp: Response, now_s: float) -> None:
+        """Count replies (character counting) and let the method react to its ok."""
+        self.model.apply(resp)
+        if isinstance(resp, Ok | ErrorReply) and self._pending:
+            line = self._pending.popleft()
+            self._pending_bytes -= len(line) + 1
+            self.on_reply(line, resp, now_s)
+
+    def poll(self, now_s: float) -> list[Output]:
+        """Give the method a chance to act, then hand over what it queued."""
+        self.tick(now_s)
+        out, self.outbox = self.outbox, []
+        return out
+
+    def next_deadline_s(self, now_s: float) -> float:
+        """Hosts tick every 5 ms."""
+        return now_s + 0.005
+
+    def busy(self) -> bool:
+        """True while the stick is held or lines await an answer."""
+        return self.stick is not None or bool(self._pending)
+
+    # for the methods ---------------------------------------------------------------------
+    def press(self, intent: ContinuousIntent, now_s: float) -> None:
+        """The stick left neutral or changed."""
+        self.stick = intent
+
+    def release(self, now_s: float) -> None:
+        """The stick returned to neutral."""
+        self.stick = None
+
+    def tick(self, now_s: float) -> None:
+        """Periodic work."""
+
+    def on_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
+        """A line was answered."""
+
+    def send(self, line: str) -> bool:
+        """Queue a line if the 128-byte RX buffer has room for it (character counting)."""
+        cost = len(line) + 1
+        if self._pending_bytes + cost > self.limits.rx_buffer_bytes:
+            return False
+        self._pending.append(line)
+        self._pending_bytes += cost
+        self.outbox.append(SendLine(line))
+        return True
+
+    def realtime(self, byte: bytes) -> None:
+        """Queue a realtime byte."""
+        self.outbox.append(SendRealtime(byte))
+
+    def axis_speeds_mm_min(self, intent: ContinuousIntent) -> dict[str, float]:
+        """Per-axis speeds the stick asks for (deflection times the speed setting)."""
+        base = self.max_feed_mm_min * intent.speed
+        return {a: v * base for a, v in intent.axes.items() if v != 0.0}
+
+    def vector_speed_mm_s(self, intent: ContinuousIntent) -> tuple[float, float]:
+        """The requested vector speed (mm/s) and the smallest acceleration of the moving axes."""
+        speeds = self.axis_speeds_mm_min(intent)
+        v = mm_min_to_mm_s(math.sqrt(sum(s * s for s in speeds.values())))
+        accel = min(self.limits.accel_mm_s2[self.limits.axes.index(a)] for a in speeds)
+        return v, accel
+
+
+class PendantPost150(_Host):
+    """The pendant post: 150 ms of travel every 150 ms, no jog cancel."""
+
+    name = "fixed 150 ms, no cancel"
+    cycle_s = 0.150
+    interval_s = 0.150
+    first_interval_s = 0.100
+
+    def __init__(self, model: MachineModel) -> None:
+        super().__init__(model)
+        self.next_send_s: float | None = None
+        self.sent_count = 0
+
+    def press(self, intent: ContinuousIntent, now_s: float) -> None:
+        first = self.stick is None
+        self.stick = intent
+        if first:
+            self.sent_count = 0
+            self.next_send_s = now_s
+
+    def release(self, now_s: float) -> None:
+        self.stick = None
+        self.next_send_s = None
+
+    def tick(self, now_s: float) -> None:
+        if self.stick is None or self.next_send_s is None or now_s < self.next_send_s:
+            return
+        intent = self.stick
+        # The post's math: speeds split over the ratio diagonal D, F = the largest ratio x speed.
+        ratios = {a: abs(v) for a, v in intent.axes.items() if v != 0.0}
+        diag = math.sqrt(sum(r * r for r in ratios.values()))
+        speed_mm_min = self.max_feed_mm_min * intent.speed
+        moves = {
+            a: speed_mm_min * math.copysign(1.0, intent.axes[a]) * r / diag * self.interval_s / 60
+            for a, r in ratios.items()
+        }
+        feed = max(ratios.values()) * speed_mm_min
+        self.send(build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes))
+        self.sent_count += 1
+        step = self.first_interval_s if self.sent_count == 1 else self.interval_s
+        self.next_send_s += step
+
+
+class WikiJog(_Host):
+    """Grbl's jogging doc: one jog in flight, next on ok, 0x85 on release."""
+
+    def __init__(self, model: MachineModel, *, corrected: bool) -> None:
+        super().__init__(model)
+        self.corrected = corrected
+        self.name = "wiki, dt corrected" if corrected else "wiki, dt as printed"
+        self.in_flight = False
+        self.cycle_s = 0.010
+
+    def dt_s(self, intent: ContinuousIntent) -> float:
+        """The doc's dt: the printed form or the corrected one, never under 10 ms."""
+        v, a = self.vector_speed_mm_s(intent)
+        n = self.limits.planner_blocks
+        dt = v / (2 * a * (n - 1)) if self.corrected else v * v / (2 * a * (n - 1))
+        return max(dt, 0.010)
+
+    def press(self, intent: ContinuousIntent, now_s: float) -> None:
+        self.stick = intent
+        self.cycle_s = self.dt_s(intent)
+
+    def release(self, now_s: float) -> None:
+        if self.stick is not None:
+            self.realtime(JOG_CANCEL)  # "stop the jog loop and simply send a jog cancel"
+        self.stick = None
+
+    def tick(self, now_s: float) -> None:
+        if self.stick is None or self.in_flight:
+            return
+        intent = self.stick
+        dt = self.dt_s(intent)
+        speeds = self.axis_speeds_mm_min(intent)
+        feed = math.sqrt(sum(s * s for s in speeds.values()))
+        moves = {a: s / 60 * dt for a, s in speeds.items()}
+        line = build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes)
+        if self.send(line):
+            self.in_flight = True
+
+    def on_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
+        self.in_flight = False
+
+
+class LongJog(_Host):
+    """One jog to the edge of travel, cancelled with 0x85 on release or change."""
+
+    name = "one long jog + 0x85"
+    cycle_s = 0.010
+
+    def __init__(self, model: MachineModel) -> None:
+        super().__init__(model)
+        self.active = False
+        self.want: ContinuousIntent | None = None
+
+    def press(self, intent: ContinuousIntent, now_s: float) -> None:
+        if self.active:
+            self.realtime(JOG_CANCEL)
+        self.stick = intent
+        self.want = intent
+
+    def release(self, now_s: float) -> None:
+        if self.active:
+            self.realtime(JOG_CANCEL)
+            self.active = False
+        self.stick = None
+        self.want = None
+
+    def tick(self, now_s: float) -> None:
+        intent = self.want
+        if intent is None or self.model.mpos_mm is None:
+            return
+        self.want = None
+        speeds = self.axis_speeds_mm_min(intent)
+        feed = math.sqrt(sum(s * s for s in speeds.values()))
+        env = self.limits.envelope
+        pos = self.model.mpos_mm
+        # Distance to the travel edge along the direction (a 1 m jog without soft limits).
+        reach = 1000.0
+        if env is not None:
+            for a, s in speeds.items():
+                i = self.limits.axes.index(a)
+                room = (env.max_mm[i] - pos[i]) if s > 0 else (pos[i] - env.min_mm[i])
+                reach = min(reach, max(room - 0.01, 0.0) * feed / abs(s))
+        moves = {a: s / feed * reach for a, s in speeds.items()}
+        if reach > 0.01 and self.send(
+            build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes)
+        ):
+            self.active = True
+
+
+def smoothjog_host(model: MachineModel, tuning: JogTuning | None = None) -> Jogger:
+    """smoothjog's own engine as a bench host."""
+    return Jogger(model, EngineLimits.from_model(model), tuning)
+
+
+REFERENCE_FACTORIES = {
+    "fixed 150 ms, no cancel": PendantPost150,
+    "wiki, dt as printed": lambda m: WikiJog(m, corrected=False),
+    "wiki, dt corrected": lambda m: WikiJog(m, corrected=True),
+    "one long jog + 0x85": LongJog,
+}

@@ -1,0 +1,142 @@
+"""Ground-truth measurements: what the simulated machine really did, from its segment trace."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from smoothjog.sim.motion import TraceSegment
+
+#: A segment slower than this is treated as standing still (mm/s): below one step per second.
+REST_MM_S = 1e-3
+
+
+def distance_after(trace: Sequence[TraceSegment], t_s: float) -> float:
+    """Path length travelled after t_s (every restart included)."""
+    total = 0.0
+    for seg in trace:
+        if seg.t1_s <= t_s:
+            continue
+        length = math.dist(seg.start_mm, seg.end_mm)
+        span = seg.t1_s - seg.t0_s
+        if seg.t0_s >= t_s or span <= 0:
+            total += length
+        else:
+            total += length * (seg.t1_s - t_s) / span
+    return total
+
+
+def last_motion_end(trace: Sequence[TraceSegment]) -> float:
+    """When the machine last stopped moving."""
+    moving = [s.t1_s for s in trace if s.speed_mm_s > REST_MM_S]
+    return max(moving) if moving else 0.0
+
+
+def restarts_after(trace: Sequence[TraceSegment], t_s: float) -> int:
+    """How many times the machine started again after coming to rest, after t_s."""
+    count = 0
+    prev_end: float | None = None
+    for seg in trace:
+        if seg.t1_s <= t_s or seg.speed_mm_s <= REST_MM_S:
+            continue
+        if prev_end is not None and seg.t0_s - prev_end > 1e-6:
+            count += 1
+        prev_end = seg.t1_s
+    return count
+
+
+def velocity_at(
+    trace: Sequence[TraceSegment], t_s: float, start: int = 0
+) -> tuple[tuple[float, ...], int]:
+    """Velocity vector at t_s (zero between segments) and the index to resume a forward scan."""
+    i = start
+    while i < len(trace) and trace[i].t1_s <= t_s:
+        i += 1
+    if i < len(trace) and trace[i].t0_s <= t_s:
+        seg = trace[i]
+        dt = seg.t1_s - seg.t0_s
+        if dt > 0:
+            return tuple((e - s) / dt for s, e in zip(seg.start_mm, seg.end_mm, strict=True)), i
+    n = len(trace[0].start_mm) if trace else 3
+    return (0.0,) * n, i
+
+
+def sample_velocity(
+    trace: Sequence[TraceSegment], t0_s: float, t1_s: float, dt_s: float = 0.001
+) -> list[tuple[float, tuple[float, ...]]]:
+    """The velocity vector every dt_s over [t0_s, t1_s)."""
+    out = []
+    idx = 0
+    steps = int((t1_s - t0_s) / dt_s)
+    for k in range(steps):
+        t = t0_s + k * dt_s
+        v, idx = velocity_at(trace, t, idx)
+        out.append((t, v))
+    return out
+
+
+def hold_quality(
+    trace: Sequence[TraceSegment], t0_s: float, t1_s: float, speed_mm_s: float
+) -> tuple[float, int]:
+    """Share of [t0, t1] spent within 2 % of speed, and how many times it dipped below 98 %."""
+    samples = sample_velocity(trace, t0_s, t1_s)
+    inside = 0
+    dips = 0
+    below = False
+    for _, v in samples:
+        s = math.sqrt(sum(c * c for c in v))
+        ok = abs(s - speed_mm_s) <= 0.02 * speed_mm_s
+        inside += ok
+        now_below = s < 0.98 * speed_mm_s
+        if now_below and not below:
+            dips += 1
+        below = now_below
+    return (inside / len(samples) if samples else 0.0), dips
+
+
+def time_to_velocity(
+    trace: Sequence[TraceSegment], t0_s: float, t_end_s: float, axis: int, target_mm_s: float
+) -> float | None:
+    """First time after t0 that the velocity along axis reaches 98 % of target (signed)."""
+    for t, v in sample_velocity(trace, t0_s, t_end_s):
+        if target_mm_s > 0 and v[axis] >= 0.98 * target_mm_s:
+            return t - t0_s
+        if target_mm_s < 0 and v[axis] <= 0.98 * target_mm_s:
+            return t - t0_s
+    return None
+
+
+def settle_time(
+    trace: Sequence[TraceSegment], t0_s: float, t_end_s: float, speed_mm_s: float
+) -> float | None:
+    """Time after t0 from which the speed stays within 2 % of speed_mm_s until t_end."""
+    last_out: float | None = None
+    for t, v in sample_velocity(trace, t0_s, t_end_s):
+        s = math.sqrt(sum(c * c for c in v))
+        if abs(s - speed_mm_s) > 0.02 * speed_mm_s:
+            last_out = t
+    if last_out is None:
+        return 0.0
+    if last_out >= t_end_s - 0.002:
+        return None
+    return last_out - t0_s + 0.001
+
+
+def lag_s(
+    commanded: Sequence[tuple[float, float]],
+    actual: Sequence[tuple[float, float]],
+    max_lag_s: float = 0.5,
+    step_s: float = 0.001,
+) -> float:
+    """The shift of actual behind commanded (both sampled every step_s) that matches them best."""
+    cmd = [c for _, c in commanded]
+    act = [a for _, a in actual]
+    best_lag, best_score = 0.0, -math.inf
+    for k in range(int(max_lag_s / step_s) + 1):
+        n = len(cmd) - k
+        if n <= 10:
+            break
+        score = sum(cmd[i] * act[i + k] for i in range(n)) / n
+        if score > best_score:
+            best_lag, best_score = k * step_s, score
+    return best_lag

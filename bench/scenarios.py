@@ -1,0 +1,205 @@
+"""The benchmark scenarios S1-S7, run in the simulator's virtual time, measured on ground truth.
+
+Every scenario starts the simulated machine, lets the host handshake, then moves the stick along
+X toward the far end of travel (the hobby router starts homed at the + corner) and measures what
+the machine really did from the simulator's segment trace.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from bench import measure
+from smoothjog.core.jogger import ContinuousIntent
+from smoothjog.core.machine import MachineModel
+from smoothjog.core.units import mm_min_to_mm_s
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile
+from smoothjog.sim.rig import LinkModel, SimRig
+from smoothjog.vsession import JogHost, VirtualSession
+
+Factory = Callable[[MachineModel], JogHost]
+
+#: The stick's X direction: toward the far end of travel from the homed + corner.
+DIRECTION = -1.0
+
+
+@dataclass
+class Run:
+    """One scenario run: its figures and, for plots, the velocity along X over time."""
+
+    metrics: dict[str, float]
+    series: list[tuple[float, float]] = field(default_factory=list)
+    commanded: list[tuple[float, float]] = field(default_factory=list)
+    host_name: str = ""
+
+
+@dataclass(frozen=True)
+class Physics:
+    """The physical quantities of a profile along X at full speed."""
+
+    speed_mm_s: float
+    accel_mm_s2: float
+
+    @property
+    def stop_mm(self) -> float:
+        """v²/(2a)."""
+        return self.speed_mm_s**2 / (2 * self.accel_mm_s2)
+
+    @property
+    def stop_s(self) -> float:
+        """v/a."""
+        return self.speed_mm_s / self.accel_mm_s2
+
+
+def physics(machine: str) -> Physics:
+    """v and a along X for a machine profile."""
+    fw = GrblFirmware(machine=machine)
+    return Physics(mm_min_to_mm_s(fw.settings[110]), fw.settings[120])
+
+
+def _session(factory: Factory, machine: str, firmware: str) -> tuple[VirtualSession, float]:
+    fw = GrblFirmware(get_firmware_profile(firmware), machine)
+    vs = VirtualSession(SimRig(fw, LinkModel()), host_factory=factory)
+    vs.handshake()
+    t0 = vs.now_s + 0.05
+    vs.run_until(t0)
+    return vs, t0
+
+
+def _stick(speed: float, x: float = DIRECTION) -> ContinuousIntent:
+    return ContinuousIntent({"X": x}, speed)
+
+
+def _series(vs: VirtualSession, t0: float, t1: float) -> list[tuple[float, float]]:
+    return [(t - t0, v[0]) for t, v in measure.sample_velocity(vs.rig.trace, t0, t1, dt_s=0.002)]
+
+
+def _hold_s(ph: Physics) -> float:
+    return max(2.0, 3.0 * ph.stop_s)
+
+
+def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed: float) -> Run:
+    """S1/S5: hold, then release; distance and time to standstill after the release."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    vs.set_intent(_stick(speed))
+    t_rel = t0 + _hold_s(ph) + phase_s
+    vs.run_until(t_rel)
+    vs.set_intent(_stick(speed, 0.0))
+    vs.run_until_idle(30.0)
+    vs.run_until(vs.now_s + 0.5)
+    trace = vs.rig.trace
+    end = measure.last_motion_end(trace)
+    return Run(
+        {
+            "dist_mm": measure.distance_after(trace, t_rel),
+            "time_s": max(end - t_rel, 0.0),
+            "restarts": float(measure.restarts_after(trace, t_rel)),
+        },
+        _series(vs, t_rel - 0.5, t_rel + 1.5),
+    )
+
+
+def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+    """S2: a 6 s hold at full speed: share of time within 2 % of v, and the dips."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    vs.set_intent(_stick(1.0))
+    t_end = t0 + max(6.0, 2 * ph.stop_s + 3.0) + phase_s
+    vs.run_until(t_end)
+    window0 = t0 + 1.5 * ph.stop_s + 0.2
+    vs.set_intent(_stick(1.0, 0.0))
+    vs.run_until_idle(30.0)
+    # Measured once the trace holds every segment up to t_end (it records finished segments).
+    share, dips = measure.hold_quality(vs.rig.trace, window0, t_end, ph.speed_mm_s)
+    return Run({"within_2pct": share, "dips": float(dips)}, _series(vs, t0, t_end + 1.0))
+
+
+def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+    """S3: full speed one way, then the other: time to full speed the other way."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    vs.set_intent(_stick(1.0))
+    t_rev = t0 + _hold_s(ph) + phase_s
+    vs.run_until(t_rev)
+    vs.set_intent(_stick(1.0, -DIRECTION))
+    t_end = t_rev + 4 * ph.stop_s + 2.0
+    vs.run_until(t_end + 0.1)
+    took = measure.time_to_velocity(vs.rig.trace, t_rev, t_end, 0, -DIRECTION * ph.speed_mm_s)
+    vs.set_intent(_stick(1.0, 0.0))
+    vs.run_until_idle(30.0)
+    return Run(
+        {"time_s": took if took is not None else math.inf},
+        _series(vs, t_rev - 0.5, t_rev + 2 * ph.stop_s + 1.0),
+    )
+
+
+def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+    """S4: the host dies mid-jog: how far the machine coasts on what was queued."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    vs.set_intent(_stick(1.0))
+    t_kill = t0 + _hold_s(ph) + phase_s
+    vs.run_until(t_kill)
+    vs.kill()
+    vs.run_until(t_kill + 20.0)
+    trace = vs.rig.trace
+    return Run(
+        {
+            "dist_mm": measure.distance_after(trace, t_kill),
+            "time_s": measure.last_motion_end(trace) - t_kill,
+        },
+        _series(vs, t_kill - 0.5, t_kill + 2.0),
+    )
+
+
+def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+    """S6: 100 % to 30 %: time to settle within 2 % of the new speed."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    vs.set_intent(_stick(1.0))
+    t_change = t0 + _hold_s(ph) + phase_s
+    vs.run_until(t_change)
+    vs.set_intent(_stick(0.3))
+    t_end = t_change + 3 * ph.stop_s + 1.5
+    vs.run_until(t_end + 0.1)
+    took = measure.settle_time(vs.rig.trace, t_change, t_end, 0.3 * ph.speed_mm_s)
+    vs.set_intent(_stick(0.3, 0.0))
+    vs.run_until_idle(30.0)
+    return Run(
+        {"time_s": took if took is not None else math.inf},
+        _series(vs, t_change - 0.5, t_change + 2 * ph.stop_s + 1.0),
+    )
+
+
+def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+    """S7: the stick swept as a 1 Hz sine at half speed: lag of actual behind commanded velocity."""
+    ph = physics(machine)
+    vs, t0 = _session(factory, machine, firmware)
+    freq_hz, speed, sample_s = 1.0, 0.5, 0.020
+    duration_s = 4.0
+    t = 0.0
+    commanded: list[tuple[float, float]] = []
+    while t < duration_s:
+        x = DIRECTION * math.sin(2 * math.pi * freq_hz * (t + phase_s))
+        vs.run_until(t0 + t)
+        vs.set_intent(_stick(speed, round(x, 4)))
+        t += sample_s
+    vs.run_until(t0 + duration_s)
+    vs.set_intent(_stick(speed, 0.0))
+    vs.run_until_idle(30.0)
+    a0, a1 = t0 + 1.0, t0 + duration_s
+    for k in range(int((a1 - a0) / 0.001)):
+        tk = a0 + k * 0.001
+        x = DIRECTION * math.sin(2 * math.pi * freq_hz * (tk - t0 + phase_s))
+        commanded.append((tk, x * speed * ph.speed_mm_s))
+    actual = [(tt, v[0]) for tt, v in measure.sample_velocity(vs.rig.trace, a0, a1)]
+    lag = measure.lag_s(commanded, actual)
+    return Run(
+        {"lag_s": lag},
+        _series(vs, t0, t0 + duration_s),
+        [(tt - t0, c) for tt, c in commanded[::2]],
+    )

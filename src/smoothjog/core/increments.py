@@ -1,0 +1,192 @@
+"""Jog-increment math: feed along a vector, the corrected block bound, queue depth, turn times.
+
+The jogging doc's rule `dt > v²/(2a(N−1))` mixes units: v²/(2a) is a *distance* (the stopping
+distance), which must fit in the N−1 blocks queued behind the executing one. The correct rules are
+`s = v·dt ≥ v²/(2a(N−1))` for the block length and `dt ≥ v/(2a(N−1))` for its duration (facts §4.3).
+
+Every function here is pure arithmetic in mm, mm/s, mm/s² and s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from smoothjog.core.units import Vec, limit_by_axis_maximum, mm_min_to_mm_s, norm, unit
+
+
+@dataclass(frozen=True)
+class VectorMove:
+    """A velocity as Grbl will run it: direction, speed along it, and the acceleration it gets."""
+
+    unit_vec: Vec
+    speed_mm_s: float
+    accel_mm_s2: float
+
+    @property
+    def velocity_mm_s(self) -> Vec:
+        """Per-axis velocity components."""
+        return tuple(u * self.speed_mm_s for u in self.unit_vec)
+
+
+def vector_move(
+    velocity_mm_s: Sequence[float], max_rate_mm_min: Sequence[float], accel_mm_s2: Sequence[float]
+) -> VectorMove | None:
+    """The move Grbl makes for a requested per-axis velocity, or None for no motion.
+
+    The speed is the vector length of the request, capped the way Grbl caps a block (facts §4.2:
+    the smallest max_i/|u_i| over moving axes), so the direction is kept and a diagonal never runs
+    faster than asked. The acceleration is Grbl's along that direction.
+    """
+    speed = norm(velocity_mm_s)
+    if speed <= 0.0:
+        return None
+    u = unit(velocity_mm_s)
+    cap_mm_s = mm_min_to_mm_s(limit_by_axis_maximum(max_rate_mm_min, u))
+    return VectorMove(u, min(speed, cap_mm_s), limit_by_axis_maximum(accel_mm_s2, u))
+
+
+def stop_distance_mm(speed_mm_s: float, accel_mm_s2: float) -> float:
+    """Distance to brake from speed to rest: v²/(2a)."""
+    return speed_mm_s * speed_mm_s / (2.0 * accel_mm_s2)
+
+
+def min_block_mm(speed_mm_s: float, accel_mm_s2: float, planner_blocks: int) -> float:
+    """The shortest block letting N−1 queued blocks hold the stopping distance (corrected)."""
+    return stop_distance_mm(speed_mm_s, accel_mm_s2) / max(planner_blocks - 1, 1)
+
+
+def min_block_s(speed_mm_s: float, accel_mm_s2: float, planner_blocks: int) -> float:
+    """The corrected time bound: dt ≥ v/(2a(N−1))."""
+    return speed_mm_s / (2.0 * accel_mm_s2 * max(planner_blocks - 1, 1))
+
+
+def queue_target_mm(speed_mm_s: float, accel_mm_s2: float, ahead_s: float) -> float:
+    """Distance to keep queued ahead of the machine to hold speed: v²/(2a) + v·ahead_s.
+
+    ahead_s covers what runs before the planner's own look-ahead counts: the segments the
+    firmware has already committed (about 50 ms on Grbl 1.1h) and the time a new line needs to
+    reach the planner (bytes on the wire plus parsing).
+    """
+    return stop_distance_mm(speed_mm_s, accel_mm_s2) + speed_mm_s * ahead_s
+
+
+def block_length_mm(
+    speed_mm_s: float,
+    accel_mm_s2: float,
+    planner_blocks: int,
+    *,
+    dt_floor_s: float,
+    queue_mm: float,
+    blocks_for_queue: int,
+) -> float:
+    """Length of the next increment: long enough for the line rate and the planner, no longer.
+
+    Three lower bounds: the line rate the link and parser sustain (v·dt_floor), the corrected
+    planner bound (v²/(2a(N−1))), and the queue fitting in `blocks_for_queue` blocks so the planner
+    never fills (a full planner holds back the `ok`, and a held `ok` defeats a clean cancel).
+    """
+    return max(
+        speed_mm_s * dt_floor_s,
+        min_block_mm(speed_mm_s, accel_mm_s2, planner_blocks),
+        queue_mm / max(blocks_for_queue, 1),
+    )
+
+
+def let_run_turn_s(
+    queued_mm: float, speed_mm_s: float, new_speed_mm_s: float, accel_mm_s2: float, *, reverse: bool
+) -> float:
+    """Predicted time to reach the new velocity if the queue already sent is left to run.
+
+    For a reversal the machine cruises until it must brake, stops at the end of the queue, then
+    accelerates the other way. For a slowdown it brakes just in time to enter the slower blocks.
+    """
+    if speed_mm_s <= 0.0:
+        return new_speed_mm_s / accel_mm_s2
+    if reverse:
+        cruise_mm = max(queued_mm - stop_distance_mm(speed_mm_s, accel_mm_s2), 0.0)
+        return cruise_mm / speed_mm_s + (speed_mm_s + new_speed_mm_s) / accel_mm_s2
+    dv = abs(speed_mm_s - new_speed_mm_s)
+    brake_mm = abs(speed_mm_s**2 - new_speed_mm_s**2) / (2.0 * accel_mm_s2)
+    if new_speed_mm_s >= speed_mm_s:
+        return dv / accel_mm_s2
+    cruise_mm = max(queued_mm - brake_mm - stop_distance_mm(new_speed_mm_s, accel_mm_s2), 0.0)
+    return cruise_mm / speed_mm_s + dv / accel_mm_s2
+
+
+def cancel_restart_s(
+    speed_mm_s: float,
+    new_speed_mm_s: float,
+    accel_mm_s2: float,
+    *,
+    committed_s: float,
+    idle_delay_s: float,
+    round_trip_s: float,
+) -> float:
+    """Predicted time to reach the new velocity by cancelling and starting again from rest.
+
+    The committed segments run out first, the machine brakes, Grbl idles `$1` twice after a
+    cancel, the sync and the first new line make a round trip, then the machine accelerates.
+    """
+    return (
+        committed_s
+        + speed_mm_s / accel_mm_s2
+        + 2.0 * idle_delay_s
+        + 2.0 * round_trip_s
+        + new_speed_mm_s / accel_mm_s2
+    )
+
+
+def ray_box_exit(
+    start_mm: Sequence[float],
+    unit_vec: Sequence[float],
+    lo_mm: Sequence[float],
+    hi_mm: Sequence[float],
+) -> tuple[float, int | None]:
+    """How far a ray from inside a box can go before leaving it, and the axis that stops it."""
+    best = math.inf
+    axis: int | None = None
+    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_mm, hi_mm, strict=True)):
+        if u > 0.0:
+            t = (hi - p) / u
+        elif u < 0.0:
+            t = (lo - p) / u
+        else:
+            continue
+        if t < best:
+            best, axis = t, i
+    return max(best, 0.0), axis
+
+
+def ray_box_entry(
+    start_mm: Sequence[float],
+    unit_vec: Sequence[float],
+    lo_mm: Sequence[float],
+    hi_mm: Sequence[float],
+) -> tuple[float, int | None]:
+    """Where a ray from outside enters a box's open interior (inf if never), and the face axis.
+
+    Slab method; touching a face or running along it is not entering.
+    """
+    t_enter = -math.inf
+    t_exit = math.inf
+    face: int | None = None
+    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_mm, hi_mm, strict=True)):
+        if u == 0.0:
+            if not lo < p < hi:
+                return math.inf, None
+            continue
+        t0 = (lo - p) / u
+        t1 = (hi - p) / u
+        if t0 > t1:
+            t0, t1 = t1, t0
+        if t0 > t_enter:
+            t_enter, face = t0, i
+        t_exit = min(t_exit, t1)
+    if t_enter >= t_exit or t_exit <= 0.0:
+        return math.inf, None
+    if t_enter < 0.0:
+        # Already inside (moved there by other means): let the user drive out rather than trap them.
+        return math.inf, None
+    return t_enter, face

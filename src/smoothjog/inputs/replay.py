@@ -1,0 +1,126 @@
+"""Timed jog intents from a JSON Lines file: how tests, benchmarks and users script jogs.
+
+One object per line, times in seconds from the start, in non-decreasing order:
+
+    {"t": 0.0, "axes": {"x": 1.0, "y": -0.5}, "speed": 0.8}   hold a stick deflection
+    {"t": 1.5, "axes": {"x": 0}}                               neutral: stop
+    {"t": 2.0, "step": {"z": -0.1}, "speed": 0.2}              exact step(s), queued in order
+    {"t": 3.0, "goto": {"x": -100, "y": -50}, "speed": 0.5}    straight G53 move to machine coords
+    {"t": 4.0, "stop": true}                                   stop now, drop queued steps
+
+Blank lines and lines starting with `#` are skipped. Axis letters may be lower or upper case.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from smoothjog.core.errors import SmoothjogError
+from smoothjog.core.jogger import (
+    STEP_MAX_MM,
+    STEP_MIN_MM,
+    ContinuousIntent,
+    GotoIntent,
+    Intent,
+    StepIntent,
+    StopIntent,
+)
+
+_KEYS = frozenset({"t", "axes", "speed", "step", "goto", "stop"})
+
+
+class ReplayError(SmoothjogError):
+    """A replay file is malformed; the message names the file and the line."""
+
+
+@dataclass(frozen=True)
+class TimedIntent:
+    """An intent and the time (s from the start) at which it takes effect."""
+
+    t_s: float
+    intent: Intent
+
+
+def load_replay(path: str | Path) -> list[TimedIntent]:
+    """Read and check a replay file; raises ReplayError naming the line at fault."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ReplayError(f"replay file {p} does not exist: check the path") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ReplayError(f"cannot read replay file {p}: {exc}") from None
+    return parse_replay(text.splitlines(), source=str(p))
+
+
+def parse_replay(lines: Iterable[str], *, source: str = "<replay>") -> list[TimedIntent]:
+    """Parse replay lines (see the module docstring) into timed intents."""
+    out: list[TimedIntent] = []
+    last_t = 0.0
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        where = f"{source}:{number}"
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ReplayError(f"{where}: not valid JSON ({exc.msg})") from None
+        if not isinstance(obj, dict):
+            raise ReplayError(f"{where}: each line must be a JSON object")
+        unknown = sorted(set(obj) - _KEYS)
+        if unknown:
+            raise ReplayError(
+                f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(_KEYS))}"
+            )
+        t = _number(obj.get("t"), where, "t")
+        if t < last_t:
+            raise ReplayError(f"{where}: time {t} goes back before {last_t}; sort the lines")
+        last_t = t
+        speed = _number(obj.get("speed", 1.0), where, "speed")
+        if not 0.0 < speed <= 1.0:
+            raise ReplayError(f"{where}: speed {speed} must be in (0, 1]")
+        kinds = [k for k in ("axes", "step", "goto", "stop") if k in obj]
+        if len(kinds) != 1:
+            raise ReplayError(f"{where}: give exactly one of axes, step, goto or stop")
+        kind = kinds[0]
+        if kind == "stop":
+            out.append(TimedIntent(t, StopIntent()))
+        elif kind == "axes":
+            axes = _axes(obj["axes"], where, "axes")
+            for axis, value in axes.items():
+                if not -1.0 <= value <= 1.0:
+                    raise ReplayError(f"{where}: deflection {axis}={value} must be in [-1, 1]")
+            out.append(TimedIntent(t, ContinuousIntent(axes, speed)))
+        elif kind == "step":
+            for axis, dist in _axes(obj["step"], where, "step").items():
+                if not STEP_MIN_MM <= abs(dist) <= STEP_MAX_MM:
+                    raise ReplayError(
+                        f"{where}: step {axis}={dist} mm must be {STEP_MIN_MM} to {STEP_MAX_MM} mm"
+                    )
+                out.append(TimedIntent(t, StepIntent(axis, dist, speed)))
+        else:
+            out.append(TimedIntent(t, GotoIntent(_axes(obj["goto"], where, "goto"), speed)))
+    return out
+
+
+def _number(value: object, where: str, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ReplayError(f"{where}: {key!r} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _axes(value: object, where: str, key: str) -> dict[str, float]:
+    if not isinstance(value, dict) or not value:
+        raise ReplayError(f'{where}: {key!r} must be an object such as {{"x": 1.0}}')
+    axes: dict[str, float] = {}
+    for name, v in value.items():
+        letter = str(name).upper()
+        if len(letter) != 1 or letter not in "XYZABCUVW":
+            raise ReplayError(f"{where}: {name!r} is not an axis letter")
+        axes[letter] = _number(v, where, f"{key}.{name}")
+    return axes
