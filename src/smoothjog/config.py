@@ -1,0 +1,367 @@
+"""Read the TOML configuration into frozen dataclasses, checking every value where it is read.
+
+Every key is documented in docs/config.md. A key that nothing reads is an error (most often a
+typo), and every error names the file, the section and the key, says what is wrong and how to
+fix it. Lengths are machine millimetres, times are seconds, speeds are fractions of the
+controller's own maxima (`$110...`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from smoothjog.core.errors import ConfigError, LinkError
+from smoothjog.core.machine import KeepOut
+from smoothjog.core.units import ALL_AXES
+from smoothjog.links.tcp import parse_tcp_url
+
+#: Environment variable naming a config file when none is given on the command line.
+CONFIG_ENV = "SMOOTHJOG_CONFIG"
+FIRMWARES = ("grbl", "grblhal", "fluidnc")
+MAX_TIMEOUT_S = 600.0
+MAX_LINK_MARGIN_S = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class ConnectionConfig:
+    """Where the controller is: a serial port or a TCP address (neither: the simulator)."""
+
+    port: str | None = None
+    baud: int = 115200
+    connect: str | None = None  # tcp://HOST:PORT
+    timeout_s: float = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class JogConfig:
+    """How jogs feel: per-axis speed ratios, the starting speed, the link's time margin."""
+
+    # Fraction (0, 1] of each axis's `$11x` maximum rate; axes not listed use 1.
+    speed_ratios: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    default_speed: float = 0.5  # fraction (0, 1] of the full jog speed at start-up
+    link_margin_s: float = 0.02  # time added per jog increment for link latency and jitter
+
+    def ratio(self, axis: str) -> float:
+        """The speed ratio of one axis (1.0 when not configured)."""
+        return self.speed_ratios.get(axis.upper(), 1.0)
+
+
+@dataclass(frozen=True, slots=True)
+class PendantConfig:
+    """The web pendant's address."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    lan: bool = False  # reachable from other devices on the local network
+
+
+@dataclass(frozen=True, slots=True)
+class SimConfig:
+    """The built-in simulator used when no controller is given."""
+
+    firmware: str = "grbl"
+    machine: str = "grbl-defaults"
+
+
+@dataclass(frozen=True, slots=True)
+class Config:
+    """The whole configuration; `source` is the file it came from (None: built-in defaults)."""
+
+    connection: ConnectionConfig = field(default_factory=ConnectionConfig)
+    jog: JogConfig = field(default_factory=JogConfig)
+    keepouts: tuple[KeepOut, ...] = ()
+    pendant: PendantConfig = field(default_factory=PendantConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    source: Path | None = None
+
+
+class _Table:
+    """One TOML table being read: typed getters with bounds, and a check for unread keys."""
+
+    def __init__(self, data: Mapping[str, Any], section: str, source: str) -> None:
+        """Wrap the table `section` of the file `source`."""
+        self.data = data
+        self.section = section
+        self.source = source
+        self._read: set[str] = set()
+
+    def error(self, key: str, problem: str) -> ConfigError:
+        """A ConfigError naming the file, section and key."""
+        return ConfigError(f"{self.source}: [{self.section}] {key} {problem}")
+
+    def _take(self, key: str) -> Any:
+        """The raw value of key, marking it read (None when absent)."""
+        self._read.add(key)
+        return self.data.get(key)
+
+    def number(
+        self,
+        key: str,
+        default: float,
+        *,
+        above: float | None = None,
+        at_least: float | None = None,
+        at_most: float | None = None,
+    ) -> float:
+        """A number within the given bounds."""
+        value = self._take(key)
+        if value is None:
+            return default
+        return self.check_number(key, value, above=above, at_least=at_least, at_most=at_most)
+
+    def check_number(
+        self,
+        key: str,
+        value: Any,
+        *,
+        above: float | None = None,
+        at_least: float | None = None,
+        at_most: float | None = None,
+    ) -> float:
+        """Check a value is a finite number within the bounds."""
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(key, f"= {value!r} is not a number: write e.g. {key} = 1.5")
+        number = float(value)
+        if not math.isfinite(number):
+            raise self.error(key, f"= {value!r} is not a finite number")
+        if above is not None and not number > above:
+            raise self.error(key, f"= {value!r} must be above {above:g}")
+        if at_least is not None and number < at_least:
+            raise self.error(key, f"= {value!r} must be at least {at_least:g}")
+        if at_most is not None and number > at_most:
+            raise self.error(key, f"= {value!r} must be at most {at_most:g}")
+        return number
+
+    def integer(self, key: str, default: int, *, at_least: int, at_most: int) -> int:
+        """A whole number within [at_least, at_most]."""
+        value = self._take(key)
+        if value is None:
+            return default
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(
+                key, f"= {value!r} is not a whole number: write e.g. {key} = {default}"
+            )
+        if not at_least <= value <= at_most:
+            raise self.error(key, f"= {value} must be from {at_least} to {at_most}")
+        return value
+
+    def text(self, key: str, default: str | None) -> str | None:
+        """A non-empty string."""
+        value = self._take(key)
+        if value is None:
+            return default
+        if not isinstance(value, str):
+            raise self.error(key, f"= {value!r} is not a string: put it in quotes")
+        if not value.strip():
+            raise self.error(key, "is empty: give a value or remove the key")
+        return value
+
+    def choice(self, key: str, default: str, choices: Sequence[str]) -> str:
+        """A string from a fixed set."""
+        value = self.text(key, default)
+        assert value is not None  # a default is given
+        if value not in choices:
+            raise self.error(key, f"= {value!r} is not one of {', '.join(choices)}")
+        return value
+
+    def flag(self, key: str, default: bool) -> bool:
+        """A boolean."""
+        value = self._take(key)
+        if value is None:
+            return default
+        if not isinstance(value, bool):
+            raise self.error(key, f"= {value!r} is not true or false")
+        return value
+
+    def table(self, key: str) -> Mapping[str, Any]:
+        """A nested table (empty when absent)."""
+        value = self._take(key)
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise self.error(key, f"= {value!r} is not a table: write {key} = {{ x = 1 }}")
+        return value
+
+    def numbers(self, key: str) -> tuple[float, ...]:
+        """A required list of 1 to 9 numbers."""
+        value = self._take(key)
+        if value is None:
+            raise self.error(key, f"is missing: give one number per axis, e.g. {key} = [0, 0, 0]")
+        if not isinstance(value, list) or not 1 <= len(value) <= len(ALL_AXES):
+            raise self.error(
+                key, f"= {value!r} is not a list of 1 to {len(ALL_AXES)} numbers (one per axis)"
+            )
+        return tuple(self.check_number(key, item) for item in value)
+
+    def finish(self) -> None:
+        """Raise for the first key nothing read (a probable typo)."""
+        unknown = sorted(set(self.data) - self._read)
+        if unknown:
+            known = ", ".join(sorted(self._read))
+            raise ConfigError(
+                f"{self.source}: unknown key {unknown[0]!r} in [{self.section}]: the known keys"
+                f" are {known} (check the spelling)"
+            )
+
+
+def _connection(table: _Table) -> ConnectionConfig:
+    """Read [connection]."""
+    port = table.text("port", None)
+    connect = table.text("connect", None)
+    if port is not None and connect is not None:
+        raise table.error("connect", "and port are both set: keep the one you use")
+    if connect is not None:
+        try:
+            parse_tcp_url(connect)
+        except LinkError as exc:
+            raise table.error("connect", f"is wrong: {exc}") from None
+    baud = table.integer("baud", 115200, at_least=1, at_most=10_000_000)
+    timeout_s = table.number("timeout_s", 5.0, above=0.0, at_most=MAX_TIMEOUT_S)
+    table.finish()
+    return ConnectionConfig(port=port, baud=baud, connect=connect, timeout_s=timeout_s)
+
+
+def _jog(table: _Table) -> JogConfig:
+    """Read [jog]."""
+    ratios: dict[str, float] = {}
+    raw_ratios = table.table("speed_ratios")
+    for axis, value in raw_ratios.items():
+        letter = axis.upper()
+        key = f"speed_ratios.{axis}"
+        if letter not in ALL_AXES:
+            raise table.error(key, f"names no axis: use one of {', '.join(ALL_AXES)}")
+        if letter in ratios:
+            raise table.error(key, "is given twice (letters are not case-sensitive)")
+        ratios[letter] = table.check_number(key, value, above=0.0, at_most=1.0)
+    default_speed = table.number("default_speed", 0.5, above=0.0, at_most=1.0)
+    link_margin_s = table.number("link_margin_s", 0.02, at_least=0.0, at_most=MAX_LINK_MARGIN_S)
+    table.finish()
+    return JogConfig(
+        speed_ratios=MappingProxyType(ratios),
+        default_speed=default_speed,
+        link_margin_s=link_margin_s,
+    )
+
+
+def _keepouts(value: Any, source: str) -> tuple[KeepOut, ...]:
+    """Read the [[keepout]] array."""
+    if not isinstance(value, list):
+        raise ConfigError(f"{source}: keepout must be written as [[keepout]] tables")
+    zones: list[KeepOut] = []
+    for index, item in enumerate(value, start=1):
+        section = f"keepout #{index}"
+        if not isinstance(item, dict):
+            raise ConfigError(f"{source}: [{section}] is not a table: write it as [[keepout]]")
+        table = _Table(item, section, source)
+        name = table.text("name", None)
+        if name is None:
+            raise table.error("name", 'is missing: give every zone a name, e.g. name = "vise"')
+        table.section = f"keepout {name!r}"
+        if any(zone.name == name for zone in zones):
+            raise table.error("name", f"= {name!r} is used twice: give each zone its own name")
+        min_mm = table.numbers("min_mm")
+        max_mm = table.numbers("max_mm")
+        if len(min_mm) != len(max_mm):
+            raise table.error(
+                "max_mm",
+                f"has {len(max_mm)} numbers but min_mm has {len(min_mm)}: give both"
+                " corners the same axes",
+            )
+        for axis, lo, hi in zip(ALL_AXES, min_mm, max_mm, strict=False):
+            if not lo < hi:
+                raise table.error(
+                    "min_mm", f"on axis {axis} ({lo:g}) is not below max_mm ({hi:g}): swap them"
+                )
+        table.finish()
+        zones.append(KeepOut(name, min_mm, max_mm))
+    return tuple(zones)
+
+
+def _pendant(table: _Table) -> PendantConfig:
+    """Read [pendant]."""
+    host = table.text("host", "127.0.0.1")
+    assert host is not None  # a default is given
+    port = table.integer("port", 8080, at_least=1, at_most=65535)
+    lan = table.flag("lan", False)
+    table.finish()
+    return PendantConfig(host=host, port=port, lan=lan)
+
+
+def _sim(table: _Table) -> SimConfig:
+    """Read [sim]."""
+    firmware = table.choice("firmware", "grbl", FIRMWARES)
+    machine = table.text("machine", "grbl-defaults")
+    assert machine is not None  # a default is given
+    table.finish()
+    return SimConfig(firmware=firmware, machine=machine)
+
+
+_SECTIONS = ("connection", "jog", "keepout", "pendant", "sim")
+
+
+def parse_config(text: str, source: str = "<config>") -> Config:
+    """Parse TOML text into a Config; source names the file in messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    for key, value in data.items():
+        if key not in _SECTIONS:
+            raise ConfigError(
+                f"{source}: unknown section {key!r}: the sections are {', '.join(_SECTIONS)}"
+                " (check the spelling)"
+            )
+        if key != "keepout" and not isinstance(value, dict):
+            raise ConfigError(f"{source}: {key} must be a section, written [{key}]")
+
+    def section(name: str) -> _Table:
+        return _Table(data.get(name, {}), name, source)
+
+    return Config(
+        connection=_connection(section("connection")),
+        jog=_jog(section("jog")),
+        keepouts=_keepouts(data.get("keepout", []), source),
+        pendant=_pendant(section("pendant")),
+        sim=_sim(section("sim")),
+    )
+
+
+def load_config(
+    path: str | os.PathLike[str] | None = None,
+    *,
+    environ: Mapping[str, str] | None = None,
+) -> Config:
+    """Load the config file at path, else the one $SMOOTHJOG_CONFIG names, else the defaults."""
+    env = os.environ if environ is None else environ
+    origin = "given with --config"
+    if path is None and env.get(CONFIG_ENV):
+        path = env[CONFIG_ENV]
+        origin = f"named by ${CONFIG_ENV}"
+    if path is None:
+        return Config()
+    file = Path(path)
+    try:
+        raw = file.read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(
+            f"config file {file} ({origin}) does not exist: check the path, or leave it out to"
+            " use the defaults"
+        ) from None
+    except IsADirectoryError:
+        raise ConfigError(
+            f"config file {file} ({origin}) is a directory: name a .toml file"
+        ) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {file} ({origin}): {exc.strerror}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{file}: not UTF-8 text (byte {exc.start}): save it as UTF-8") from None
+    return replace(parse_config(text, str(file)), source=file)

@@ -1,0 +1,207 @@
+"""The Link contract every transport keeps: lines out, realtime bytes out, lines in.
+
+A link knows nothing of jogging. It guarantees three things the layers above rely on:
+- `send_line` puts exactly one `\\n` after the text and refuses text that would confuse Grbl's
+  line reader (facts §1.1, §5.2);
+- `send_realtime` never waits behind queued lines: the byte overtakes every line the link still
+  holds, and goes out at a line boundary so grblHAL's jog cancel cannot cut a line in half
+  (facts §7);
+- `read_line` returns each received line once, in order, and raises `LinkError` (never hangs) once
+  the peer has gone or the link was closed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from types import TracebackType
+from typing import Self
+
+from smoothjog.core.errors import LinkError
+from smoothjog.links.framing import DEFAULT_MAX_LINE_BYTES, LineFramer
+
+#: Characters Grbl picks out of the stream wherever they appear (facts §5.2): inside a line they
+#: would act at once (`!` holds, `~` resumes) instead of being part of the line.
+REALTIME_CHARS = frozenset("?!~")
+
+#: Single bytes below 0x80 that are realtime commands: `?`, `!`, `~`, Ctrl-X (reset) and
+#: grblHAL's 0x19 stop; every byte from 0x80 up is realtime or ignored (facts §5.2, §7).
+_LOW_REALTIME_BYTES = frozenset(b"?!~\x18\x19")
+
+
+class RefusedError(LinkError):
+    """The caller asked a link to send something Grbl would misread; nothing was sent."""
+
+
+def encode_line(text: str) -> bytes:
+    """Check a line for sending and return its bytes with the single `\\n` appended."""
+    for index, char in enumerate(text):
+        if char in "\r\n":
+            raise RefusedError(
+                f"line {text!r} contains an end-of-line at position {index}: send one line"
+                " per call, the link adds the `\\n` itself"
+            )
+        if char in REALTIME_CHARS:
+            raise RefusedError(
+                f"line {text!r} contains {char!r}, which Grbl treats as a realtime command"
+                " wherever it appears: send it with send_realtime() instead"
+            )
+        # Bytes >= 0x80 are realtime commands or dropped, bytes < 0x20 are dropped or reset
+        # the controller (0x18), so only printable ASCII can travel inside a line.
+        if not " " <= char <= "~":
+            raise RefusedError(
+                f"line {text!r} contains the character {char!r} at position {index}:"
+                " only printable ASCII can be sent to a Grbl controller"
+            )
+    return text.encode("ascii") + b"\n"
+
+
+def check_realtime(byte: bytes) -> None:
+    """Refuse anything that is not a single realtime command byte."""
+    if len(byte) != 1:
+        raise RefusedError(
+            f"a realtime command is exactly one byte, not {len(byte)} ({byte!r}):"
+            " send lines with send_line()"
+        )
+    if byte[0] < 0x80 and byte[0] not in _LOW_REALTIME_BYTES:
+        raise RefusedError(
+            f"{byte!r} is not a realtime command (those are ?, !, ~, Ctrl-X and bytes"
+            " 0x80-0xFF): send lines with send_line()"
+        )
+
+
+class LineInbox:
+    """Received bytes in, whole lines out, in order; ends with a LinkError, never a hang."""
+
+    def __init__(self, max_line_bytes: int = DEFAULT_MAX_LINE_BYTES) -> None:
+        """Create an empty inbox."""
+        self.framer = LineFramer(max_line_bytes)
+        self._lines: collections.deque[bytes] = collections.deque()
+        self._waiters: list[asyncio.Future[None]] = []
+        self._gone: LinkError | None = None
+        self._closed: LinkError | None = None
+        self.lines_received = 0
+
+    @property
+    def ended(self) -> bool:
+        """True once the peer has gone or the link was closed."""
+        return self._gone is not None or self._closed is not None
+
+    def feed(self, data: bytes) -> None:
+        """Frame received bytes and queue the completed lines."""
+        lines = self.framer.feed(data)
+        if lines:
+            self._lines.extend(lines)
+            self.lines_received += len(lines)
+            self._wake()
+
+    def peer_gone(self, error: LinkError) -> None:
+        """The peer went away: lines already received are still delivered, then error."""
+        if self._gone is None:
+            self._gone = error
+        self._wake()
+
+    def close(self, error: LinkError) -> None:
+        """The link was closed here: readers get the error at once, queued lines are dropped."""
+        if self._closed is None:
+            self._closed = error
+        self._lines.clear()
+        self._wake()
+
+    def peek(self) -> tuple[bytes, ...]:
+        """The lines waiting to be read, oldest first, without taking them."""
+        return tuple(self._lines)
+
+    async def get(self) -> bytes:
+        """The oldest unread line; raises the LinkError once there is none and never will be."""
+        while True:
+            if self._closed is not None:
+                raise self._closed
+            if self._lines:
+                return self._lines.popleft()
+            if self._gone is not None:
+                raise self._gone
+            await self._changed()
+
+    async def wait_for(self, predicate: Callable[[bytes], bool], timeout_s: float) -> bool:
+        """Wait until a queued (unread) line satisfies predicate; False on timeout or end."""
+        loop = asyncio.get_running_loop()
+        deadline_s = loop.time() + timeout_s
+        while not any(predicate(line) for line in self._lines):
+            remaining_s = deadline_s - loop.time()
+            if self.ended or remaining_s <= 0:
+                return False
+            try:
+                await asyncio.wait_for(self._changed(), remaining_s)
+            except TimeoutError:
+                return False
+        return True
+
+    def _changed(self) -> asyncio.Future[None]:
+        """A future resolved at the next change (new lines, peer gone, closed)."""
+        waiter: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._waiters.append(waiter)
+        return waiter
+
+    def _wake(self) -> None:
+        """Resolve every pending waiter."""
+        waiters, self._waiters = self._waiters, []
+        for waiter in waiters:
+            if not waiter.done():
+                waiter.set_result(None)
+
+
+class Link(ABC):
+    """An open-able, close-able line transport to one controller (asyncio)."""
+
+    async def __aenter__(self) -> Self:
+        """Open the link."""
+        await self.open()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        """Close the link."""
+        await self.close()
+
+    @abstractmethod
+    async def open(self) -> None:
+        """Open the transport; raises LinkError with a sentence a user can act on."""
+
+    async def send_line(self, text: str) -> None:
+        """Send one line followed by exactly one `\\n`; waits only if the link's queue is full."""
+        await self._write_line(encode_line(text))
+
+    def send_realtime(self, byte: bytes) -> None:
+        """Send one realtime byte now, ahead of every line still queued in the link."""
+        check_realtime(byte)
+        self._write_realtime(byte)
+
+    @abstractmethod
+    async def read_line(self) -> bytes:
+        """The next received line without its end-of-line; LinkError once the peer is gone.
+
+        Cancelling a waiting read_line (e.g. with asyncio.wait_for) loses no line.
+        """
+
+    @abstractmethod
+    async def close(self) -> None:
+        """Close the transport; closing twice is harmless."""
+
+    @abstractmethod
+    def describe(self) -> str:
+        """Where this link goes, for messages (e.g. "/dev/ttyUSB0 at 115200 baud")."""
+
+    @abstractmethod
+    async def _write_line(self, data: bytes) -> None:
+        """Queue one checked, encoded line (ending in `\\n`) for sending."""
+
+    @abstractmethod
+    def _write_realtime(self, byte: bytes) -> None:
+        """Write one checked realtime byte ahead of the queued lines."""

@@ -1,0 +1,287 @@
+"""A Link over a serial port (USB or UART), opened with pyserial and driven by the event loop.
+
+pyserial opens and configures the port (raw mode, baud, exclusive lock); after that the link
+reads and writes the file descriptor itself, non-blocking, from the event loop (`add_reader` /
+`add_writer`) rather than from a reader thread. Why: there is no thread to hand lines across or to
+stop, a realtime byte is written from the same thread that orders the queue (so it can overtake
+the queued lines safely), and a vanished device shows up at once as a readable fd that returns an
+error. The cost: this needs a selector event loop on a POSIX system (Linux, macOS, BSD).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import errno
+import itertools
+import os
+import stat
+
+import serial
+
+from smoothjog.core.errors import LinkError
+from smoothjog.core.responses import Banner, parse_response
+from smoothjog.links.base import LineInbox, Link
+
+#: Grbl's default baud rate (facts §5.1).
+DEFAULT_BAUD = 115200
+#: An Arduino-based Grbl resets when the port opens (DTR); its bootloader waits about 1-2 s before
+#: Grbl prints the banner.
+DEFAULT_WAIT_BANNER_S = 2.5
+#: Lines the link may hold before send_line waits; far above what character counting allows.
+QUEUE_HIGH_WATER_BYTES = 64 * 1024
+#: Most bytes handed to the OS in one write.
+_WRITE_CHUNK_BYTES = 4096
+_READ_CHUNK_BYTES = 65536
+
+
+def is_banner(line: bytes) -> bool:
+    """True when line is a Grbl-family welcome banner."""
+    return isinstance(parse_response(line), Banner)
+
+
+class SerialLink(Link):
+    """A serial port to a controller; `open()` waits for the reset banner."""
+
+    def __init__(
+        self,
+        path: str,
+        baud: int = DEFAULT_BAUD,
+        *,
+        wait_banner_s: float = DEFAULT_WAIT_BANNER_S,
+    ) -> None:
+        """Describe the port; nothing is opened until open()."""
+        self.path = path
+        self.baud = baud
+        self.wait_banner_s = wait_banner_s
+        self._serial: serial.Serial | None = None
+        self._fd = -1
+        self._inbox = LineInbox()
+        # Each entry is one encoded line or one realtime byte, not yet fully written.
+        self._out: collections.deque[bytes] = collections.deque()
+        # Bytes of _out[0] already written: a realtime byte must not land inside that line.
+        self._head_written = 0
+        self._queued_bytes = 0
+        self._writer_armed = False
+        self._room = asyncio.Event()
+        self._room.set()
+        self._error: LinkError | None = None
+        self.banner_seen = False
+
+    def describe(self) -> str:
+        """The port and its speed."""
+        return f"{self.path} at {self.baud} baud"
+
+    @property
+    def queued_bytes(self) -> int:
+        """Bytes accepted by the link but not yet handed to the operating system."""
+        return self._queued_bytes
+
+    async def open(self) -> None:
+        """Open the port and wait up to wait_banner_s for the banner a reset prints."""
+        if self._serial is not None:
+            return
+        if self.baud <= 0:
+            raise LinkError(
+                f"baud rate {self.baud} for {self.path} is not positive: use e.g. 115200"
+            )
+        self._check_path()
+        port = self._open_port()
+        loop = asyncio.get_running_loop()
+        self._serial = port
+        self._fd = port.fileno()
+        os.set_blocking(self._fd, False)
+        self._inbox = LineInbox()
+        self._error = None
+        loop.add_reader(self._fd, self._on_readable)
+        self.banner_seen = await self._inbox.wait_for(is_banner, self.wait_banner_s)
+        if self._error is not None:
+            await self.close()
+            raise self._error
+
+    async def read_line(self) -> bytes:
+        """The next received line without its end-of-line."""
+        return await self._inbox.get()
+
+    async def close(self) -> None:
+        """Stop watching the port and close it; harmless when already closed."""
+        port, self._serial = self._serial, None
+        if port is None:
+            return
+        self._stop_watching()
+        self._out.clear()
+        self._queued_bytes = 0
+        self._room.set()
+        closed = LinkError(f"the link to {self.describe()} was closed")
+        if self._error is None:
+            self._error = closed
+        self._inbox.close(closed)
+        port.close()
+
+    async def _write_line(self, data: bytes) -> None:
+        """Queue a line and write what the OS accepts now; wait while the queue is too long."""
+        while True:
+            self._check_usable()
+            if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
+                break
+            self._room.clear()
+            await self._room.wait()
+        self._out.append(data)
+        self._queued_bytes += len(data)
+        self._flush()
+
+    def _write_realtime(self, byte: bytes) -> None:
+        """Put the byte ahead of every whole queued line, then write."""
+        self._check_usable()
+        # A line already partly written must finish first: grblHAL drops a half-read line on a
+        # jog cancel (facts §7), which would turn its second half into a garbled new line.
+        self._out.insert(1 if self._head_written else 0, byte)
+        self._queued_bytes += 1
+        self._flush()
+
+    def _check_usable(self) -> None:
+        """Raise the link's error if it is closed or the device has gone."""
+        if self._error is not None:
+            raise self._error
+        if self._serial is None:
+            raise LinkError(f"the link to {self.describe()} is not open: call open() first")
+
+    def _flush(self) -> None:
+        """Write as much of the queue as the OS takes; arm the writer callback for the rest."""
+        while self._out:
+            chunk = bytearray(self._out[0][self._head_written :])
+            for item in itertools.islice(self._out, 1, None):
+                if len(chunk) + len(item) > _WRITE_CHUNK_BYTES:
+                    break
+                chunk += item
+            try:
+                written = os.write(self._fd, chunk)
+            except BlockingIOError:
+                written = 0
+            except OSError as exc:
+                self._lost(f"writing failed: {exc.strerror}")
+                return
+            self._consume(written)
+            if written < len(chunk):
+                break
+        self._arm_writer(bool(self._out))
+        if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
+            self._room.set()
+
+    def _consume(self, written: int) -> None:
+        """Drop written bytes from the front of the queue."""
+        self._queued_bytes -= written
+        while written > 0:
+            left_in_head = len(self._out[0]) - self._head_written
+            if written >= left_in_head:
+                self._out.popleft()
+                self._head_written = 0
+                written -= left_in_head
+            else:
+                self._head_written += written
+                written = 0
+
+    def _arm_writer(self, wanted: bool) -> None:
+        """Ask the loop to call _flush when the fd can take more, or stop asking."""
+        if wanted == self._writer_armed:
+            return
+        loop = asyncio.get_running_loop()
+        if wanted:
+            loop.add_writer(self._fd, self._flush)
+        else:
+            loop.remove_writer(self._fd)
+        self._writer_armed = wanted
+
+    def _on_readable(self) -> None:
+        """Read what arrived and frame it into lines."""
+        try:
+            data = os.read(self._fd, _READ_CHUNK_BYTES)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._lost(f"reading failed: {exc.strerror}")
+            return
+        if not data:
+            self._lost("the device reported end of file")
+            return
+        self._inbox.feed(data)
+
+    def _lost(self, reason: str) -> None:
+        """The device went away: stop watching it and fail every reader and writer."""
+        self._stop_watching()
+        error = LinkError(
+            f"lost {self.describe()} ({reason}): the controller was unplugged, reset or"
+            " powered off; check the cable and connect again"
+        )
+        self._error = error
+        self._out.clear()
+        self._queued_bytes = 0
+        self._room.set()
+        self._inbox.peer_gone(error)
+
+    def _stop_watching(self) -> None:
+        """Remove the fd from the event loop."""
+        if self._fd < 0:
+            return
+        loop = asyncio.get_running_loop()
+        loop.remove_reader(self._fd)
+        if self._writer_armed:
+            loop.remove_writer(self._fd)
+            self._writer_armed = False
+
+    def _check_path(self) -> None:
+        """Refuse a path that does not exist or is not a character device, with a clear hint."""
+        try:
+            mode = os.stat(self.path).st_mode
+        except FileNotFoundError:
+            raise LinkError(
+                f"no serial port at {self.path}: check that the controller is plugged in and"
+                " the name is right (ls /dev/ttyUSB* /dev/ttyACM*)"
+            ) from None
+        except OSError as exc:
+            raise LinkError(f"cannot look at {self.path}: {exc.strerror}") from None
+        if not stat.S_ISCHR(mode):
+            raise LinkError(
+                f"{self.path} is not a serial port (it is not a device file): give the"
+                " controller's port, e.g. /dev/ttyUSB0 or /dev/ttyACM0"
+            )
+
+    def _open_port(self) -> serial.Serial:
+        """Open and configure the port with pyserial, translating its errors."""
+        try:
+            return serial.Serial(
+                self.path,
+                self.baud,
+                timeout=0,
+                write_timeout=0,
+                exclusive=True,
+            )
+        except ValueError as exc:
+            raise LinkError(f"cannot use {self.describe()}: {exc}; try 115200") from None
+        except serial.SerialException as exc:
+            raise self._open_error(exc) from None
+
+    def _open_error(self, exc: serial.SerialException) -> LinkError:
+        """One actionable sentence for a failed open."""
+        code = exc.errno
+        if code == errno.EACCES:
+            return LinkError(
+                f"permission denied opening {self.path}: add your user to the port's group"
+                " (e.g. `sudo usermod -aG dialout $USER`, then log in again)"
+            )
+        if code in (errno.EBUSY, errno.EAGAIN) or "exclusively lock" in str(exc):
+            return LinkError(
+                f"{self.path} is in use by another program (a G-code sender, a serial"
+                " monitor?): close it and try again"
+            )
+        if code in (errno.ENOENT, errno.ENODEV, errno.ENXIO):
+            return LinkError(
+                f"no serial port at {self.path}: check that the controller is plugged in"
+                " and powered"
+            )
+        if code in (errno.ENOTTY, errno.EINVAL) or "Inappropriate ioctl" in str(exc):
+            return LinkError(
+                f"{self.path} is not a serial port: give the controller's port,"
+                " e.g. /dev/ttyUSB0 or /dev/ttyACM0"
+            )
+        return LinkError(f"cannot open {self.describe()}: {exc}")
