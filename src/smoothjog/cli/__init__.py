@@ -16,7 +16,7 @@ from smoothjog import __version__
 from smoothjog.core.errors import SmoothjogError
 
 #: Subcommand modules, in the order `--help` lists them.
-SUBCOMMANDS: tuple[str, ...] = ()
+SUBCOMMANDS: tuple[str, ...] = ("info", "sim", "jog")
 
 #: The subcommand that runs when none is given (the README's main job).
 DEFAULT_COMMAND: str | None = None
@@ -47,9 +47,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit code."""
     args_list = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    if DEFAULT_COMMAND is not None and not any(a in SUBCOMMANDS for a in args_list):
-        if not {"-h", "--help", "--version"} & set(args_list):
-            args_list.insert(0, DEFAULT_COMMAND)
+    if (
+        DEFAULT_COMMAND is not None
+        and not any(a in SUBCOMMANDS for a in args_list)
+        and not {"-h", "--help", "--version"} & set(args_list)
+    ):
+        args_list.insert(0, DEFAULT_COMMAND)
     args = parser.parse_args(args_list)
     func = getattr(args, "func", None)
     if func is None:

@@ -1,0 +1,1278 @@
+"""Grbl 1.1h's serial protocol and state machine around the motion model, with time passed in.
+
+The model follows the firmware's structure so its flaws come out the same (facts §1-§5):
+- an ISR model takes each received byte at its arrival time: realtime bytes only set flags (or
+  reset at once), every other byte goes to the RX ring, which drops bytes when full;
+- a main-loop model reads lines from the ring, spends `line_time_s` parsing and planning each,
+  blocks in "mc_line" while the planner is full, and runs the realtime checkpoint
+  (protocol_execute_realtime) whenever the firmware would: while polling, while blocked for a
+  planner slot, a buffer sync or a dwell, and inside the suspend loop (hold, door, jog cancel);
+- the stepper ISR's step-idle delay ($1 ms) freezes the main loop after every cycle stop, and
+  once more inside a jog cancel's st_reset (facts §3.1, brief);
+- a jog cancel does not flush the RX ring nor the line blocked in mc_line (facts §3.1).
+
+Nothing here reads a clock: `receive`, `advance` and the constructor take the time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+from smoothjog.core.gcode import (
+    ExecResult,
+    ParserState,
+    TravelBox,
+    check_jog_dispatch,
+    execute_block,
+    gc_modes_report,
+    preparse,
+    read_number,
+)
+from smoothjog.core.units import mm_to_inch
+from smoothjog.sim.motion import CYCLE_STOP, AxisLimits, Motion, TraceSegment
+from smoothjog.sim.profiles import (
+    GRBL,
+    FirmwareProfile,
+    JogClip,
+    MachineProfile,
+    load_machine_profile,
+)
+from smoothjog.sim.rxbuffer import Realtime, RxRing, classify
+from smoothjog.sim.settings import Eeprom, GrblSettings, format_grbl_float
+from smoothjog.sim.status import StatusInputs, StatusReporter
+
+Vec = tuple[float, ...]
+
+# Machine states, spelled as status reports print them.
+IDLE = "Idle"
+ALARM = "Alarm"
+CHECK = "Check"
+HOMING = "Home"
+CYCLE = "Run"
+HOLD = "Hold"
+JOG = "Jog"
+DOOR = "Door"
+SLEEP = "Sleep"
+
+# sys.suspend bits (system.h).
+SUSPEND_HOLD_COMPLETE = 1 << 0
+SUSPEND_RETRACT_COMPLETE = 1 << 2
+SUSPEND_INITIATE_RESTORE = 1 << 3
+SUSPEND_RESTORE_COMPLETE = 1 << 4
+SUSPEND_SAFETY_DOOR_AJAR = 1 << 5
+SUSPEND_MOTION_CANCEL = 1 << 6
+SUSPEND_JOG_CANCEL = 1 << 7
+
+# sys_rt_exec_state bits: requests from the ISRs to the main loop.
+EXEC_STATUS_REPORT = 1 << 0
+EXEC_CYCLE_START = 1 << 1
+EXEC_CYCLE_STOP = 1 << 2
+EXEC_FEED_HOLD = 1 << 3
+EXEC_RESET = 1 << 4
+EXEC_SAFETY_DOOR = 1 << 5
+EXEC_MOTION_CANCEL = 1 << 6
+EXEC_SLEEP = 1 << 7
+_HOLD_GROUP = EXEC_MOTION_CANCEL | EXEC_FEED_HOLD | EXEC_SAFETY_DOOR | EXEC_SLEEP
+
+# Alarm codes (facts §5.6).
+ALARM_HARD_LIMIT = 1
+ALARM_SOFT_LIMIT = 2
+ALARM_ABORT_CYCLE = 3
+ALARM_HOMING_FAIL_RESET = 6
+
+# Status codes the protocol layer itself sends (facts §5.7).
+_E_BAD_NUMBER = 2
+_E_INVALID_STATEMENT = 3
+_E_SETTING_DISABLED = 5
+_E_NOT_IDLE = 8
+_E_GCODE_LOCKED = 9
+_E_OVERFLOW = 11
+_E_LINE_LENGTH = 14
+_E_TRAVEL_EXCEEDED = 15
+
+#: `delay_sec` in a dwell sleeps in 50 ms steps (DWELL_TIME_STEP), so G4 P is rounded up to them.
+DWELL_STEP_S = 0.050
+#: Door resume waits for the spindle / coolant to come back (SAFETY_DOOR_*_DELAY).
+SPINDLE_RESTORE_S = 4.0
+COOLANT_RESTORE_S = 1.0
+#: EEPROM_LINE_SIZE: a stored startup line holds at most this many characters.
+STARTUP_LINE_CHARS = 80
+#: A line the main loop keeps raw bytes of; beyond this the tail is dropped (only comments can
+#: be this long, and the pre-parser flags overflow long before for anything else).
+_RAW_LINE_CAP = 65536
+_EPS_S = 1e-12
+
+HELP_LINE = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
+
+_OVERRIDE_STEPS: dict[Realtime, tuple[int, int]] = {
+    # (index into overrides: 0 feed, 1 rapid, 2 spindle; change, where 0 = back to 100 %)
+    Realtime.FEED_OVR_RESET: (0, 0),
+    Realtime.FEED_OVR_COARSE_PLUS: (0, 10),
+    Realtime.FEED_OVR_COARSE_MINUS: (0, -10),
+    Realtime.FEED_OVR_FINE_PLUS: (0, 1),
+    Realtime.FEED_OVR_FINE_MINUS: (0, -1),
+    Realtime.SPINDLE_OVR_RESET: (2, 0),
+    Realtime.SPINDLE_OVR_COARSE_PLUS: (2, 10),
+    Realtime.SPINDLE_OVR_COARSE_MINUS: (2, -10),
+    Realtime.SPINDLE_OVR_FINE_PLUS: (2, 1),
+    Realtime.SPINDLE_OVR_FINE_MINUS: (2, -1),
+}
+_RAPID_OVERRIDES: dict[Realtime, int] = {
+    Realtime.RAPID_OVR_RESET: 100,
+    Realtime.RAPID_OVR_MEDIUM: 50,
+    Realtime.RAPID_OVR_LOW: 25,
+}
+
+
+# ------------------------------------------------------------------------------------------
+# The main loop's work list: what the line being executed still has to do, in order.
+
+
+@dataclass
+class _Busy:
+    """The main loop computes (parse + plan) for dt_s; no checkpoint meanwhile."""
+
+    dt_s: float
+    until_s: float | None = None
+
+
+@dataclass
+class _Execute:
+    """Dispatch one preparsed line (protocol_main_loop's if-chain)."""
+
+    text: str
+    overflow: bool
+
+
+@dataclass
+class _Plan:
+    """mc_line: wait (checkpointing) for a planner slot, then queue the block."""
+
+    target_mm: Vec
+    feed_mm_min: float
+    rapid: bool
+    jog: bool
+    dropped: bool = False
+
+
+@dataclass
+class _Sync:
+    """protocol_buffer_synchronize: wait until the planner is empty and the cycle over."""
+
+
+@dataclass
+class _Dwell:
+    """delay_sec in dwell mode: 50 ms steps with a checkpoint each."""
+
+    seconds: float
+    end_s: float | None = None
+
+
+@dataclass
+class _SoftLimit:
+    """limits_soft_check failed for a G-code target: hold if moving, then reset + ALARM:2."""
+
+    hold_requested: bool = False
+    raised: bool = False
+
+
+@dataclass
+class _Home:
+    """The homing cycle: runs the moves with no checkpoint except for reset."""
+
+    started: bool = False
+    final_mm: Vec = ()
+
+
+@dataclass
+class _Emit:
+    """Send one line to the host."""
+
+    text: str
+
+
+@dataclass
+class _Call:
+    """Run a piece of the line's execution that needs the current time."""
+
+    fn: Callable[[float], None]
+
+
+_Step = _Busy | _Execute | _Plan | _Sync | _Dwell | _SoftLimit | _Home | _Emit | _Call
+#: Steps during which the line has been parsed and is "inside" execution: a reset then still
+#: gets that line's reply (the stray ok of facts §3.4).
+_IN_EXECUTION = (_Plan, _Sync, _Dwell, _SoftLimit, _Home)
+
+
+@dataclass
+class _Overrides:
+    """Feed, rapid and spindle overrides in percent."""
+
+    pct: list[int] = field(default_factory=lambda: [100, 100, 100])
+
+
+class GrblFirmware:
+    """A simulated Grbl-family controller: bytes in at a time, time-stamped lines out."""
+
+    def __init__(
+        self,
+        firmware: FirmwareProfile = GRBL,
+        machine: MachineProfile | str | None = None,
+        *,
+        eeprom: Eeprom | None = None,
+        on_eeprom_write: Callable[[Eeprom], None] | None = None,
+        now_s: float = 0.0,
+    ) -> None:
+        """Power the controller up at now_s: banner, then Idle or Alarm (facts §2, §5.3)."""
+        if machine is None:
+            machine = "grbl-defaults"
+        if isinstance(machine, str):
+            machine = load_machine_profile(machine)
+        self.profile = firmware
+        self.machine = machine
+        self.n_axes = machine.n_axes
+        self.on_eeprom_write = on_eeprom_write
+        self.settings = GrblSettings(self.n_axes, firmware.extra_settings)
+        machine.apply(self.settings)
+        coords: tuple[Vec, ...] | None = None
+        g28: Vec | None = None
+        g30: Vec | None = None
+        self.startup_lines: list[str] = ["", ""]
+        self.build_info = ""
+        if eeprom is not None:
+            for number, value in eeprom.settings.items():
+                self.settings.force(number, value)
+            coords, g28, g30 = eeprom.coord_systems_mm, eeprom.g28_mm, eeprom.g30_mm
+            self.startup_lines = list(eeprom.startup_lines)
+            self.build_info = eeprom.build_info
+        self.motion = Motion(
+            self._axis_limits(),
+            junction_deviation_mm=self.settings[11],
+            planner_blocks=firmware.planner_blocks,
+        )
+        self.parser = ParserState.initial(
+            self.n_axes, coord_systems_mm=coords, g28_mm=g28, g30_mm=g30
+        )
+        self.rx = RxRing(firmware.rx_size)
+        self.reporter = StatusReporter()
+        self.state = IDLE
+        self.suspend = 0
+        self._now_s = now_s
+        self._rt = 0
+        self._rt_alarm = 0
+        self._exec_hold = False  # STEP_CONTROL_EXECUTE_HOLD
+        self._soft_limit = False  # sys.soft_limit
+        self._locked = False  # in the critical-alarm loop, waiting for a reset
+        self._frozen_until_s = now_s
+        self._after_freeze: Callable[[float], None] | None = None
+        self._steps: deque[_Step] = deque()
+        self._line_buf = bytearray()
+        self._held_line: bytes | None = None
+        self._overrides = _Overrides()
+        self._pending_overrides: list[Realtime] = []
+        self._accessories_off = False  # spindle/coolant cut by a door or sleep
+        self._restore_until_s: float | None = None
+        self._sleep_reported = False
+        self._output: list[tuple[float, bytes]] = []
+        #: Lines executed, in order, with their reply (for tests and debugging).
+        self.lines_executed = 0
+        self._power_up(now_s)
+
+    # ------------------------------------------------------------------ public interface
+    def receive(self, data: bytes, now_s: float) -> None:
+        """Bytes arriving at the controller's UART at now_s (one ISR call per byte)."""
+        self.advance(now_s)
+        for byte in data:
+            if self._polling_quietly() and byte not in (0x0A, 0x0D) and self.is_line_byte(byte):
+                # Fast path, same effect as ring + _poll: the idle main loop takes it at once.
+                if len(self._line_buf) < _RAW_LINE_CAP:
+                    self._line_buf.append(byte)
+                continue
+            self._isr(byte, now_s)
+            self._service(now_s)
+
+    def is_line_byte(self, byte: int) -> bool:
+        """True when byte goes to the RX ring (it is not a realtime command or discarded)."""
+        return byte < 0x80 and byte not in self.profile.realtime
+
+    def _polling_quietly(self) -> bool:
+        """The main loop sits in its reader with nothing pending: a byte is consumed at once."""
+        return (
+            not self._steps
+            and self._held_line is None
+            and not self._rt
+            and not self.suspend
+            and not self._locked
+            and self._after_freeze is None
+            and self._frozen_until_s <= self._now_s
+            and not len(self.rx)
+            and (self.state != IDLE or self.motion.planner_empty())
+        )
+
+    def advance(self, to_s: float) -> None:
+        """Let time pass up to to_s, running every event on the way in time order."""
+        if to_s < self._now_s:
+            return
+        stalled = 0
+        while True:
+            t = self._next_internal_s()
+            if t is None or t > to_s:
+                break
+            # An event at or before the current time must be consumed by running there once.
+            stalled = stalled + 1 if t <= self._now_s else 0
+            if stalled > 1000:
+                raise RuntimeError(f"simulated firmware stuck at t={t} (a bug in the model)")
+            self._run_at(max(t, self._now_s))
+        # Every event up to to_s has run; only the motion's interpolated position moves on.
+        self._motion_to(to_s)
+        self._now_s = to_s
+
+    def next_event_s(self) -> float | None:
+        """When something will next happen on its own, or None if only input can change it."""
+        return self._next_internal_s()
+
+    def take_output(self) -> list[tuple[float, bytes]]:
+        """The lines sent since the last call, each with its send time and `\\r\\n`."""
+        out, self._output = self._output, []
+        return out
+
+    @property
+    def now_s(self) -> float:
+        """The time the firmware has been advanced to."""
+        return self._now_s
+
+    @property
+    def trace(self) -> list[TraceSegment]:
+        """Ground truth: every executed step segment with its times and end points."""
+        return self.motion.trace
+
+    def status_state(self) -> str:
+        """The state as a status report would print it (`Hold:0`, `Door:1`, `Jog`...)."""
+        sub = self._substate()
+        return self.state if sub is None else f"{self.state}:{sub}"
+
+    def mpos_mm(self) -> Vec:
+        """Machine position from the step counters (what a report shows, in mm)."""
+        steps = self.motion.position_steps()
+        return tuple(s / self.settings[100 + i] for i, s in enumerate(steps))
+
+    def wpos_mm(self) -> Vec:
+        """Work position: MPos minus the work coordinate offset."""
+        wco = self.parser.work_offset_mm
+        return tuple(m - w for m, w in zip(self.mpos_mm(), wco, strict=True))
+
+    def eeprom(self) -> Eeprom:
+        """What this controller would keep over a power cycle."""
+        return Eeprom(
+            settings=self.settings.snapshot(),
+            coord_systems_mm=self.parser.coord_systems_mm,
+            g28_mm=self.parser.g28_mm,
+            g30_mm=self.parser.g30_mm,
+            startup_lines=(self.startup_lines[0], self.startup_lines[1]),
+            build_info=self.build_info,
+        )
+
+    # ------------------------------------------------------------------ power-up and reset
+    def _power_up(self, now_s: float) -> None:
+        """main(): HOMING_INIT_LOCK puts a machine with $22=1 in Alarm at power-up only."""
+        if self.machine.start == "homed":
+            # Assumption (documented in the profile): start as if `$H` had just completed.
+            pos = self._homed_position_mm()
+            self.motion.set_position_mm(pos)
+            self.state = IDLE
+        elif self.settings.int_value(22):
+            self.state = ALARM
+        self.parser = self.parser.with_position(self.mpos_mm())
+        self._emit(now_s, "")
+        self._emit(now_s, self.profile.banner)
+        self._main_loop_start(now_s)
+
+    def _main_loop_start(self, now_s: float) -> None:
+        """Start of protocol_main_loop: the unlock message in Alarm, else the startup lines."""
+        if self.state in (ALARM, SLEEP):
+            self._emit(now_s, "[MSG:'$H'|'$X' to unlock]")
+            self.state = ALARM
+        else:
+            self.state = IDLE
+            self._run_startup_lines(now_s)
+
+    def _abort(self, now_s: float) -> None:
+        """A soft reset reaches the main loop: stray reply, then re-initialise (facts §3.4)."""
+        head = self._steps[0] if self._steps else None
+        if isinstance(head, _IN_EXECUTION):
+            # The line was inside mc_line / a sync / a dwell: it returns and gets its reply.
+            self._emit(now_s, "ok")
+        self._steps.clear()
+        self._rt = 0
+        self._rt_alarm = 0
+        self.suspend = 0
+        self._exec_hold = False
+        self._soft_limit = False
+        self._locked = False
+        self._after_freeze = None
+        self._restore_until_s = None
+        self._sleep_reported = False
+        self._accessories_off = False
+        self._overrides = _Overrides()
+        self._pending_overrides.clear()
+        self.reporter.reset()
+        self.rx.clear()
+        self._line_buf.clear()
+        self._held_line = None
+        self.motion.kill()
+        self.parser = self.parser.after_reset().with_position(self.mpos_mm())
+        self._emit(now_s, "")
+        self._emit(now_s, self.profile.banner)
+        self._main_loop_start(now_s)
+
+    def _run_startup_lines(self, now_s: float) -> None:
+        """system_execute_startup: each stored line runs and prints `>line:ok` or its error."""
+        for line in self.startup_lines:
+            if not line:
+                continue
+            res = execute_block(line, self.parser, jog=False, n_axes=self.n_axes)
+            if res.ok:
+                self.parser = res.state
+                if res.wco_changed:
+                    self.reporter.force_wco()
+                for motion in res.motions:
+                    if self.motion.planner_free() > 0:
+                        self.motion.plan_line(
+                            motion.target_mm, motion.feed_mm_min, rapid=motion.rapid
+                        )
+            reply = "ok" if res.ok else f"error:{res.error}"
+            self._emit(now_s, f">{line}:{reply}")
+
+    # ------------------------------------------------------------------ the ISR model
+    def _isr(self, byte: int, now_s: float) -> None:
+        """serial.c's receive ISR: realtime bytes set flags, others go to the ring."""
+        kind = classify(byte, self.profile.realtime)
+        if kind is None:
+            self.rx.push(byte)
+            return
+        if kind is Realtime.RESET:
+            self._mc_reset(now_s)
+        elif kind is Realtime.STATUS:
+            self._rt |= EXEC_STATUS_REPORT
+        elif kind is Realtime.CYCLE_START:
+            self._rt |= EXEC_CYCLE_START
+        elif kind is Realtime.FEED_HOLD:
+            self._rt |= EXEC_FEED_HOLD
+        elif kind is Realtime.SAFETY_DOOR:
+            self._rt |= EXEC_SAFETY_DOOR
+        elif kind is Realtime.JOG_CANCEL:
+            if self.profile.cancel_flushes_rx:
+                # grblHAL: the input buffer and a half-read line are dropped in any state (§7).
+                self.rx.clear()
+                self._line_buf.clear()
+            # The state test happens here, at arrival, not when the flag is serviced (§3.1).
+            if self.state == JOG:
+                self._rt |= EXEC_MOTION_CANCEL
+        elif kind is not Realtime.DISCARD:
+            self._pending_overrides.append(kind)
+
+    def _mc_reset(self, now_s: float) -> None:
+        """mc_reset, run inside the ISR: kill motion now; ALARM:3 (6 when homing) if moving."""
+        if self._rt & EXEC_RESET:
+            return
+        self._rt |= EXEC_RESET
+        moving = self.state in (CYCLE, HOMING, JOG) or self.motion.is_running()
+        if moving:
+            self._rt_alarm = ALARM_HOMING_FAIL_RESET if self.state == HOMING else ALARM_ABORT_CYCLE
+            self._motion_to(now_s)
+            self.motion.kill()
+
+    # ------------------------------------------------------------------ time stepping
+    def _next_internal_s(self) -> float | None:
+        """The earliest time at which the motion or the main loop changes by itself."""
+        times: list[float] = []
+        motion_t = self.motion.next_event_s()
+        if motion_t is not None:
+            times.append(motion_t)
+        if self._frozen_until_s > self._now_s:
+            times.append(self._frozen_until_s)
+        else:
+            head = self._steps[0] if self._steps else None
+            if isinstance(head, _Busy) and head.until_s is not None:
+                times.append(head.until_s)
+            elif isinstance(head, _Dwell) and head.end_s is not None and not self.suspend:
+                times.append(head.end_s)
+            if self._restore_until_s is not None:
+                times.append(self._restore_until_s)
+        return min(times) if times else None
+
+    def _run_at(self, t_s: float) -> None:
+        """Advance the motion to t_s, then let the main loop run there."""
+        self._motion_to(t_s)
+        self._now_s = t_s
+        self._service(t_s)
+
+    def _motion_to(self, t_s: float) -> None:
+        """Advance the motion; a cycle stop is the stepper ISR's st_go_idle + EXEC_CYCLE_STOP."""
+        for event_s, name in self.motion.advance(t_s):
+            if name == CYCLE_STOP:
+                self._rt |= EXEC_CYCLE_STOP
+                self._step_idle_delay(event_s)
+
+    def _step_idle_delay(self, t_s: float) -> None:
+        """st_go_idle's delay of $1 ms, which keeps the main loop from running (brief, §3.1)."""
+        lock_ms = self.settings.int_value(1)
+        if (lock_ms != 255 or self._rt_alarm or self.state == SLEEP) and self.state != HOMING:
+            self._freeze(t_s, lock_ms / 1000.0)
+
+    def _freeze(self, t_s: float, dt_s: float) -> None:
+        """The main loop gets no CPU for dt_s from t_s (an ISR delay or a blocking pause)."""
+        if dt_s <= 0.0:
+            return
+        start = max(self._frozen_until_s, t_s)
+        self._frozen_until_s = start + dt_s
+        head = self._steps[0] if self._steps else None
+        if isinstance(head, _Busy) and head.until_s is not None and head.until_s > t_s:
+            # The ISR steals the time from the line being parsed.
+            head.until_s += dt_s
+
+    def _service(self, now_s: float) -> None:
+        """Run the main loop at now_s until it has to wait for time or input."""
+        for _ in range(100_000):
+            if not self._step_once(now_s):
+                return
+        raise RuntimeError("simulated main loop made no progress (a bug in the model)")
+
+    def _step_once(self, now_s: float) -> bool:
+        """One unit of main-loop work at now_s; False when it must wait."""
+        if now_s < self._frozen_until_s - _EPS_S:
+            return False
+        if self._after_freeze is not None:
+            fn, self._after_freeze = self._after_freeze, None
+            fn(now_s)
+            return True
+        if self._locked:
+            # The critical-alarm loop: nothing but a reset, not even status reports (§2).
+            if self._rt & EXEC_RESET:
+                self._abort(now_s)
+                return True
+            return False
+        head = self._steps[0] if self._steps else None
+        if isinstance(head, _Busy):
+            if head.until_s is None:
+                head.until_s = now_s + head.dt_s
+            if now_s + _EPS_S >= head.until_s:
+                self._steps.popleft()
+                return True
+            return False
+        if isinstance(head, _Execute):
+            self._steps.popleft()
+            self.lines_executed += 1
+            self._steps.extendleft(reversed(self._execute_line(head, now_s)))
+            return True
+        if isinstance(head, _Emit):
+            self._steps.popleft()
+            self._emit(now_s, head.text)
+            return True
+        if isinstance(head, _Call):
+            self._steps.popleft()
+            head.fn(now_s)
+            return True
+        if isinstance(head, _Home):
+            return self._homing_step(head, now_s)
+        # Everything else waits inside protocol_execute_realtime: a checkpoint first.
+        changed = self._checkpoint(now_s)
+        if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
+            return True
+        if self._locked or head is not (self._steps[0] if self._steps else None):
+            return True  # an abort or alarm changed the picture
+        if self.suspend:
+            return changed
+        if head is None:
+            return self._poll(now_s) or changed
+        if isinstance(head, _Plan):
+            return self._plan_step(head, now_s) or changed
+        if isinstance(head, _Sync):
+            idle = self.motion.planner_empty() and not self.motion.is_running()
+            if idle and self.state != CYCLE:
+                self._steps.popleft()
+                return True
+            return self._auto_cycle_start() or changed
+        if isinstance(head, _Dwell):
+            if head.end_s is None:
+                n_steps = math.ceil(head.seconds / DWELL_STEP_S - 1e-9)
+                head.end_s = now_s + max(n_steps, 0) * DWELL_STEP_S
+            if now_s + _EPS_S >= head.end_s:
+                self._steps.popleft()
+                return True
+            return changed
+        if isinstance(head, _SoftLimit):
+            return self._soft_limit_step(head, now_s) or changed
+        raise AssertionError(f"unknown step {head!r}")
+
+    # ------------------------------------------------------------------ line reading
+    def _poll(self, now_s: float) -> bool:
+        """protocol_main_loop's reader: take bytes until a line end, then execute that line."""
+        if self._held_line is not None:
+            raw, self._held_line = self._held_line, None
+            pre = preparse(raw, max_line_chars=self.profile.max_line_chars)
+            if pre.text and not pre.overflow:
+                self._steps.append(_Busy(self.profile.line_time_s))
+            self._steps.append(_Execute(pre.text, pre.overflow))
+            return True
+        while True:
+            byte = self.rx.pop()
+            if byte is None:
+                break
+            if byte in (0x0A, 0x0D):
+                # The line is complete; the checkpoint at its EOL runs before it executes.
+                self._held_line = bytes(self._line_buf)
+                self._line_buf.clear()
+                return True
+            if len(self._line_buf) < _RAW_LINE_CAP:
+                self._line_buf.append(byte)
+        return self._auto_cycle_start()
+
+    def _auto_cycle_start(self) -> bool:
+        """protocol_auto_cycle_start: queued blocks start a cycle (only Idle reacts to it)."""
+        if (
+            self.state == IDLE
+            and not self.motion.planner_empty()
+            and not self._rt & EXEC_CYCLE_START
+        ):
+            self._rt |= EXEC_CYCLE_START
+            return True
+        return False
+
+    # ------------------------------------------------------------------ the realtime checkpoint
+    def _checkpoint(self, now_s: float) -> bool:
+        """protocol_execute_realtime: service the flags, then one pass of the suspend loop."""
+        changed = self._rt_system(now_s)
+        if self._locked or self._after_freeze is not None or self._frozen_until_s > now_s:
+            return True
+        if self.suspend:
+            changed = self._suspend_pass(now_s) or changed
+        return changed
+
+    def _rt_system(self, now_s: float) -> bool:
+        """protocol_exec_rt_system: alarms, reset, status, holds, cycle start/stop, overrides."""
+        if self._rt_alarm:
+            code, self._rt_alarm = self._rt_alarm, 0
+            self.state = ALARM
+            self._emit(now_s, f"ALARM:{code}")
+            self._freeze(now_s, self.profile.alarm_pause_s)
+            if code in (ALARM_HARD_LIMIT, ALARM_SOFT_LIMIT):
+                self._after_freeze = self._enter_critical_lock
+            return True
+        flags = self._rt
+        if flags & EXEC_RESET:
+            self._abort(now_s)
+            return True
+        changed = False
+        if flags & EXEC_STATUS_REPORT:
+            self._rt &= ~EXEC_STATUS_REPORT
+            self._emit(now_s, self._status_report())
+            changed = True
+        if flags & _HOLD_GROUP:
+            self._hold_events(flags, now_s)
+            self._rt &= ~_HOLD_GROUP
+            changed = True
+        if flags & EXEC_CYCLE_START:
+            self._cycle_start(flags, now_s)
+            self._rt &= ~EXEC_CYCLE_START
+            changed = True
+        if flags & EXEC_CYCLE_STOP:
+            self._rt &= ~EXEC_CYCLE_STOP
+            self._cycle_stop(now_s)
+            changed = True
+        if self._pending_overrides:
+            self._apply_overrides()
+            changed = True
+        return changed
+
+    def _enter_critical_lock(self, now_s: float) -> None:
+        """After ALARM:1/2 and its pause: block everything until a new reset (§2)."""
+        self._emit(now_s, "[MSG:Reset to continue]")
+        self._rt &= ~EXEC_RESET
+        self._locked = True
+
+    def _hold_events(self, flags: int, now_s: float) -> None:
+        """Motion cancel, feed hold, safety door and sleep, with Grbl's state rules (§3)."""
+        if (
+            not self.profile.hold_cancels_jog
+            and self.state == JOG
+            and not flags & (EXEC_MOTION_CANCEL | EXEC_SAFETY_DOOR | EXEC_SLEEP)
+        ):
+            return  # grblHAL ignores a feed hold while jogging (facts §7)
+        if self.state not in (ALARM, CHECK):
+            if self.state in (CYCLE, JOG) and not self.suspend & (
+                SUSPEND_MOTION_CANCEL | SUSPEND_JOG_CANCEL
+            ):
+                self.motion.hold(now_s)
+                self._exec_hold = True
+                if self.state == JOG and not flags & EXEC_SLEEP:
+                    # Any hold event in Jog is a jog cancel (§3.2, §3.3).
+                    self.suspend |= SUSPEND_JOG_CANCEL
+                    if self.profile.cancel_drops_blocked_jog:
+                        self._drop_blocked_jog()
+            if self.state == IDLE:
+                # Not moving: the hold is complete at once; lines stop being read (§3.2). A
+                # cancel whose flag was set in Jog but is serviced in Idle lands here too.
+                self.suspend = SUSPEND_HOLD_COMPLETE
+            if flags & EXEC_MOTION_CANCEL and self.state != JOG:
+                self.suspend |= SUSPEND_MOTION_CANCEL
+            if flags & EXEC_FEED_HOLD and self.state not in (DOOR, JOG, SLEEP):
+                self.state = HOLD
+            if flags & EXEC_SAFETY_DOOR:
+                self._emit(now_s, "[MSG:Check Door]")
+                if not self.suspend & SUSPEND_JOG_CANCEL and self.state != SLEEP:
+                    self.state = DOOR
+                self.suspend |= SUSPEND_SAFETY_DOOR_AJAR
+        if flags & EXEC_SLEEP:
+            if self.state == ALARM:
+                self.suspend |= SUSPEND_RETRACT_COMPLETE | SUSPEND_HOLD_COMPLETE
+            self.state = SLEEP
+
+    def _drop_blocked_jog(self) -> None:
+        """FluidNC's mc_cancel_jog: a jog waiting for a planner slot is dropped, answered ok."""
+        head = self._steps[0] if self._steps else None
+        if isinstance(head, _Plan) and head.jog:
+            head.dropped = True
+
+    def _cycle_start(self, flags: int, now_s: float) -> None:
+        """`~` and auto cycle start: resume a completed hold or door, start queued blocks."""
+        if flags & (EXEC_FEED_HOLD | EXEC_MOTION_CANCEL | EXEC_SAFETY_DOOR):
+            return  # a start at the same time as a hold request is ignored
+        if self.state == DOOR and not self.suspend & SUSPEND_SAFETY_DOOR_AJAR:
+            if self.suspend & SUSPEND_RESTORE_COMPLETE:
+                self.state = IDLE
+            elif self.suspend & SUSPEND_RETRACT_COMPLETE:
+                self.suspend |= SUSPEND_INITIATE_RESTORE
+        if self.state == IDLE or (self.state == HOLD and self.suspend & SUSPEND_HOLD_COMPLETE):
+            self._exec_hold = False
+            if not self.motion.planner_empty() and not self.suspend & SUSPEND_MOTION_CANCEL:
+                self.suspend = 0
+                self.state = CYCLE
+                if self.motion.hold_complete():
+                    self.motion.resume(now_s)
+                else:
+                    self.motion.start_cycle(now_s)
+            else:
+                self.suspend = 0
+                self.state = IDLE
+                if self.motion.hold_active():
+                    self.motion.clear_after_stop()
+
+    def _cycle_stop(self, now_s: float) -> None:
+        """The steppers ran out: a hold is complete, or motion is over (jog cancel: flush)."""
+        if (
+            self.state in (HOLD, DOOR, SLEEP)
+            and not self._soft_limit
+            and not self.suspend & SUSPEND_JOG_CANCEL
+        ):
+            if self._exec_hold:
+                self.suspend |= SUSPEND_HOLD_COMPLETE
+            self._exec_hold = False
+            return
+        if self.suspend & SUSPEND_JOG_CANCEL:
+            # plan_reset + st_reset + gc_sync_position + plan_sync_position. The blocked line
+            # and the RX ring are left alone: that is the ghost jog of facts §3.1.
+            self._exec_hold = False
+            self.motion.clear_after_stop()
+            self.parser = self.parser.with_position(self.mpos_mm())
+            # st_reset calls st_go_idle once more: a second $1 delay, still in state Jog.
+            self._step_idle_delay(now_s)
+            self._after_freeze = self._finish_motion_complete
+            return
+        self._finish_motion_complete(now_s)
+
+    def _finish_motion_complete(self, now_s: float) -> None:
+        """End of a cycle: Idle, or Door when the door opened during a jog cancel."""
+        del now_s
+        if self.suspend & SUSPEND_SAFETY_DOOR_AJAR:
+            self.suspend &= ~SUSPEND_JOG_CANCEL
+            self.suspend |= SUSPEND_HOLD_COMPLETE
+            self.state = DOOR
+        else:
+            self.suspend = 0
+            self.state = IDLE
+
+    def _suspend_pass(self, now_s: float) -> bool:
+        """One pass of protocol_exec_rt_suspend (no parking: the default build)."""
+        if not self.suspend & SUSPEND_HOLD_COMPLETE:
+            return False
+        if self.state not in (DOOR, SLEEP):
+            return False
+        if not self.suspend & SUSPEND_RETRACT_COMPLETE:
+            self._accessories_off = True
+            self.suspend |= SUSPEND_RETRACT_COMPLETE
+            return True
+        if self.state == SLEEP:
+            if not self._sleep_reported:
+                self._sleep_reported = True
+                self._emit(now_s, "[MSG:Sleeping]")
+                return True
+            return False
+        changed = False
+        if self.suspend & SUSPEND_SAFETY_DOOR_AJAR:
+            # No door pin in the simulator: the door reads closed at once (Door:1 -> Door:0).
+            self.suspend &= ~SUSPEND_SAFETY_DOOR_AJAR
+            changed = True
+        if self.suspend & SUSPEND_INITIATE_RESTORE and not self.suspend & SUSPEND_RESTORE_COMPLETE:
+            if self._restore_until_s is None:
+                delay_s = SPINDLE_RESTORE_S if self.parser.spindle != "M5" else 0.0
+                if self.parser.coolant_flood or self.parser.coolant_mist:
+                    delay_s += COOLANT_RESTORE_S
+                self._restore_until_s = now_s + delay_s
+                changed = True
+            if now_s + _EPS_S >= self._restore_until_s:
+                self._restore_until_s = None
+                self._accessories_off = False
+                self.suspend |= SUSPEND_RESTORE_COMPLETE
+                self._rt |= EXEC_CYCLE_START
+                changed = True
+        return changed
+
+    def _apply_overrides(self) -> None:
+        """Feed/rapid/spindle overrides and accessory toggles (they change Ov:, not jogs)."""
+        pct = self._overrides.pct
+        for kind in self._pending_overrides:
+            if kind in _OVERRIDE_STEPS:
+                index, change = _OVERRIDE_STEPS[kind]
+                pct[index] = 100 if change == 0 else min(200, max(10, pct[index] + change))
+            elif kind in _RAPID_OVERRIDES:
+                pct[1] = _RAPID_OVERRIDES[kind]
+            elif kind is Realtime.FLOOD_TOGGLE and self.state in (IDLE, CYCLE, HOLD, JOG):
+                self.parser = replace(self.parser, coolant_flood=not self.parser.coolant_flood)
+            # Mist needs ENABLE_M7 (off by default) and the spindle-stop toggle needs a
+            # running spindle in Hold; neither changes what a jog host sees, so both are ignored.
+        self._pending_overrides.clear()
+        self.reporter.force_ovr()
+
+    # ------------------------------------------------------------------ reports
+    def _substate(self) -> int | None:
+        """The number after `Hold:` / `Door:`."""
+        if self.state == HOLD:
+            return 0 if self.suspend & SUSPEND_HOLD_COMPLETE else 1
+        if self.state == DOOR:
+            if self.suspend & SUSPEND_INITIATE_RESTORE:
+                return 3
+            if self.suspend & SUSPEND_RETRACT_COMPLETE:
+                return 1 if self.suspend & SUSPEND_SAFETY_DOOR_AJAR else 0
+            return 2
+        return None
+
+    def _status_report(self) -> str:
+        """report_realtime_status for the current instant."""
+        p = self.parser
+        spindle_on = p.spindle != "M5" and not self._accessories_off
+        accessories = ""
+        if spindle_on:
+            accessories += "S" if p.spindle == "M3" else "C"
+        if not self._accessories_off:
+            accessories += ("F" if p.coolant_flood else "") + ("M" if p.coolant_mist else "")
+        inputs = StatusInputs(
+            state=self.state,
+            substate=self._substate(),
+            mpos_mm=self.mpos_mm(),
+            wco_mm=p.work_offset_mm,
+            planner_free=self.motion.planner_free(),
+            rx_free=self.rx.free(),
+            feed_mm_min=self.motion.realtime_rate_mm_min(),
+            spindle_rpm=p.spindle_speed_rpm if spindle_on else 0.0,
+            overrides_pct=(
+                self._overrides.pct[0],
+                self._overrides.pct[1],
+                self._overrides.pct[2],
+            ),
+            accessories=accessories,
+        )
+        return self.reporter.build(
+            inputs,
+            status_mask=self.settings.int_value(10),
+            inches=bool(self.settings.int_value(13)),
+        )
+
+    def _emit(self, now_s: float, text: str) -> None:
+        """Queue one line to the host."""
+        self._output.append((now_s, text.encode("ascii") + b"\r\n"))
+
+    # ------------------------------------------------------------------ line execution
+    def _execute_line(self, step: _Execute, now_s: float) -> list[_Step]:
+        """protocol_main_loop's dispatch of one complete line; returns the work it starts."""
+        text = step.text
+        if step.overflow:
+            return [_Emit(f"error:{_E_OVERFLOW}")]
+        if not text:
+            return [_Emit("ok")]
+        if text[0] == "$":
+            return self._system_line(text, now_s)
+        if self.state in (ALARM, JOG):
+            return [_Emit(f"error:{_E_GCODE_LOCKED}")]
+        return self._gcode_line(text)
+
+    def _envelope(self) -> TravelBox | None:
+        """The soft-limit box when $20=1: -$13x <= target <= 0 on every axis (facts §2)."""
+        if not self.settings.int_value(20):
+            return None
+        travel = [self.settings[130 + i] for i in range(self.n_axes)]
+        return TravelBox(tuple(-t for t in travel), tuple(0.0 for _ in travel))
+
+    def _gcode_line(self, text: str) -> list[_Step]:
+        """A plain G-code line: parse, then the sync / dwell / motions it asks for, then ok."""
+        res = execute_block(
+            text,
+            self.parser,
+            jog=False,
+            envelope=self._envelope(),
+            n_axes=self.n_axes,
+            arc_tolerance_mm=self.settings[12],
+        )
+        if not res.ok:
+            return [_Emit(f"error:{res.error}")]
+        before = self.parser
+        self.parser = res.state
+        stored = (before.coord_systems_mm, before.g28_mm, before.g30_mm)
+        if stored != (res.state.coord_systems_mm, res.state.g28_mm, res.state.g30_mm):
+            self._eeprom_written()  # G10, G28.1 and G30.1 write EEPROM
+        return [*self._gcode_actions(res), _Emit("ok")]
+
+    def _gcode_actions(self, res: ExecResult) -> list[_Step]:
+        """The execution body of one accepted G-code block, in the firmware's order."""
+        steps: list[_Step] = []
+        check = self.state == CHECK
+        if res.dwell_s is not None and not check:
+            steps += [_Sync(), _Dwell(res.dwell_s)]
+        if res.wco_changed:
+            # FORCE_BUFFER_SYNC_DURING_WCO_CHANGE is on in the default build.
+            steps += [_Sync(), _Call(lambda _t: self.reporter.force_wco())]
+        if res.spindle_changed or res.coolant_changed:
+            steps.append(_Call(lambda _t: self.reporter.force_ovr()))
+        if not check:
+            steps += [_Plan(m.target_mm, m.feed_mm_min, m.rapid, jog=False) for m in res.motions]
+        if res.soft_limit_violation:
+            steps.append(_SoftLimit())
+            return steps
+        if res.program_flow == "M0" and not check:
+            steps += [_Sync(), _Call(self._program_pause)]
+        elif res.program_end:
+            steps += [_Sync(), _Emit("[MSG:Pgm End]")]
+        return steps
+
+    def _program_pause(self, now_s: float) -> None:
+        """M0: a feed hold once the buffer is synced."""
+        del now_s
+        self._rt |= EXEC_FEED_HOLD
+
+    def _jog_line(self, text: str) -> list[_Step]:
+        """`$J=`: parse as a jog, check the travel, queue it; Idle starts Jog at once (§1.4)."""
+        res = execute_block(text, self.parser, jog=True, envelope=None, n_axes=self.n_axes)
+        if not res.ok or res.motion is None:
+            return [_Emit(f"error:{res.error}")]
+        target = res.motion.target_mm
+        box = self._envelope()
+        if box is not None and not box.contains(target):
+            clip = self.profile.jog_clip
+            if clip is JogClip.CLIP_PER_AXIS:
+                target = _clip_per_axis(target, box)
+            elif clip is JogClip.CLIP_IF_40 and self.settings.int_value(40):
+                target = _clip_along_line(self.parser.position_mm, target, box)
+            else:
+                return [_Emit(f"error:{_E_TRAVEL_EXCEEDED}")]
+        # The parser position moves only once mc_line returns (gc_execute_line copies the target
+        # after jog_execute), so a cancel's gc_sync_position during a blocked jog is overwritten
+        # by that jog's target: the ghost jog of facts §3.1 ends exactly where the queue would.
+        return [_Plan(target, res.motion.feed_mm_min, rapid=False, jog=True), _Emit("ok")]
+
+    def _plan_step(self, step: _Plan, now_s: float) -> bool:
+        """mc_line's wait for a free block, then plan_buffer_line (and jog_execute's start)."""
+        if step.dropped:
+            self._steps.popleft()
+            return True
+        if self.state == CHECK:
+            self._steps.popleft()  # mc_line returns at once in check mode
+            return True
+        if self.motion.planner_free() <= 0:
+            return self._auto_cycle_start()
+        self.motion.plan_line(step.target_mm, step.feed_mm_min, rapid=step.rapid)
+        self._steps.popleft()
+        if step.jog:
+            if self.state == IDLE and not self.motion.planner_empty():
+                self.state = JOG
+                self.motion.start_cycle(now_s)
+            self.parser = self.parser.with_position(step.target_mm)
+        return True
+
+    def _soft_limit_step(self, step: _SoftLimit, now_s: float) -> bool:
+        """limits_soft_check: stop a running cycle first, then reset with ALARM:2."""
+        del now_s
+        if step.raised:
+            return False
+        if self.state == CYCLE and not step.hold_requested:
+            step.hold_requested = True
+            self._soft_limit = True
+            self._rt |= EXEC_FEED_HOLD
+            return True
+        if step.hold_requested and self.state != IDLE:
+            return False
+        step.raised = True
+        self._rt |= EXEC_RESET
+        self._rt_alarm = ALARM_SOFT_LIMIT
+        return True
+
+    # ------------------------------------------------------------------ `$` commands
+    def _system_line(self, text: str, now_s: float) -> list[_Step]:
+        """system_execute_line: the `$` commands with their state rules (§1.4, §5.3)."""
+        if text == "$":
+            return [_Emit(HELP_LINE), _Emit("ok")]
+        cmd = text[1]
+        if cmd == "J":
+            err = check_jog_dispatch(text, self.state)
+            if err is not None:
+                return [_Emit(f"error:{err}")]
+            return self._jog_line(text)
+        if cmd in "$GCX":
+            if len(text) != 2:
+                return self._reply(_E_INVALID_STATEMENT)
+            if cmd == "$":
+                if self.state in (CYCLE, HOLD):
+                    return self._reply(_E_NOT_IDLE)
+                return [*(_Emit(line) for line in self.settings.dollar_lines()), _Emit("ok")]
+            if cmd == "G":
+                inches = bool(self.settings.int_value(13))
+                return [_Emit(gc_modes_report(self.parser, inches)), _Emit("ok")]
+            if cmd == "C":
+                if self.state == CHECK:
+                    self._mc_reset(now_s)
+                    return [_Emit("[MSG:Disabled]"), _Emit("ok")]
+                if self.state != IDLE:
+                    return self._reply(_E_NOT_IDLE)
+                self.state = CHECK
+                return [_Emit("[MSG:Enabled]"), _Emit("ok")]
+            if self.state == ALARM:  # $X
+                self.state = IDLE
+                return [_Emit("[MSG:Caution: Unlocked]"), _Emit("ok")]
+            return [_Emit("ok")]
+        if self.state not in (IDLE, ALARM):
+            return self._reply(_E_NOT_IDLE)
+        if cmd == "#":
+            if len(text) != 2:
+                return self._reply(_E_INVALID_STATEMENT)
+            return [*(_Emit(line) for line in self._parameter_lines()), _Emit("ok")]
+        if cmd == "H":
+            if not self.settings.int_value(22):
+                return self._reply(_E_SETTING_DISABLED)
+            if len(text) != 2:
+                return self._reply(_E_INVALID_STATEMENT)
+            return [_Home(), _Emit("ok")]
+        if cmd == "S":
+            if text != "$SLP":
+                return self._reply(_E_INVALID_STATEMENT)
+            self._rt |= EXEC_SLEEP
+            return [_Emit("ok")]
+        if cmd == "I":
+            if len(text) == 2:
+                return [
+                    _Emit(self.profile.version_line.format(user=self.build_info)),
+                    _Emit(self.profile.options_line),
+                    _Emit("ok"),
+                ]
+            if text[2] != "=":
+                return self._reply(_E_INVALID_STATEMENT)
+            self.build_info = text[3:]
+            self._eeprom_written()
+            return [_Emit("ok")]
+        if cmd == "R":
+            return self._restore(text, now_s)
+        if cmd == "N" and len(text) == 2:
+            lines = [_Emit(f"$N{i}={line}") for i, line in enumerate(self.startup_lines)]
+            return [*lines, _Emit("ok")]
+        return self._store_line(text)
+
+    def _reply(self, code: int) -> list[_Step]:
+        """A single `error:N` reply (or ok for 0)."""
+        return [_Emit("ok" if code == 0 else f"error:{code}")]
+
+    def _restore(self, text: str, now_s: float) -> list[_Step]:
+        """`$RST=$`, `$RST=#`, `$RST=*`: restore EEPROM data, then a soft reset."""
+        if len(text) != 6 or not text.startswith("$RST=") or text[5] not in "$#*":
+            return self._reply(_E_INVALID_STATEMENT)
+        which = text[5]
+        if which in "$*":
+            fresh = GrblSettings(self.n_axes, self.profile.extra_settings)
+            for number, value in fresh.items():
+                self.settings.force(number, value)
+            self._reconfigure_motion()
+        if which in "#*":
+            zero = (0.0,) * self.n_axes
+            self.parser = replace(
+                self.parser,
+                coord_systems_mm=tuple(zero for _ in range(6)),
+                g28_mm=zero,
+                g30_mm=zero,
+            )
+        if which == "*":
+            self.startup_lines = ["", ""]
+        self._eeprom_written()
+        self._mc_reset(now_s)
+        return [_Emit("[MSG:Restoring defaults]"), _Emit("ok")]
+
+    def _store_line(self, text: str) -> list[_Step]:
+        """`$Nx=line` and `$x=val` (facts §2 rules for $20/$22 live in GrblSettings.store)."""
+        startup = text[1] == "N"
+        start = 2 if startup else 1
+        if startup and self.state != IDLE:
+            return self._reply(_E_NOT_IDLE)
+        number = read_number(text, start)
+        if number is None:
+            return self._reply(_E_BAD_NUMBER)
+        parameter, index = number
+        if index >= len(text) or text[index] != "=":
+            return self._reply(_E_INVALID_STATEMENT)
+        rest = text[index + 1 :]
+        if startup:
+            if len(rest) + 1 > STARTUP_LINE_CHARS:
+                return self._reply(_E_LINE_LENGTH)
+            # Assumption: the line is checked by parsing it against a copy of the parser state;
+            # Grbl executes it for real, which only matters for lines that move.
+            res = execute_block(rest, self.parser, jog=False, n_axes=self.n_axes)
+            if not res.ok:
+                return self._reply(res.error)
+            slot = math.trunc(parameter)
+            if 0 <= slot < len(self.startup_lines):
+                self.startup_lines[slot] = rest
+                self._eeprom_written()
+            return [_Emit("ok")]
+        value = read_number(rest, 0)
+        if value is None:
+            return self._reply(_E_BAD_NUMBER)
+        if value[1] != len(rest) or parameter > 255:
+            return self._reply(_E_INVALID_STATEMENT)
+        setting = math.trunc(parameter)
+        before = self.settings.snapshot()
+        code = self.settings.store(setting, value[0])
+        if code == 0:
+            if setting == 13 and before[13] != self.settings[13]:
+                self.reporter.force_wco()
+            if setting == 11 or setting >= 100:
+                self._reconfigure_motion()
+            self._eeprom_written()
+        return self._reply(code)
+
+    def _parameter_lines(self) -> list[str]:
+        """`$#`: the stored offsets, G92, TLO and the last probe (never probed: zeros)."""
+        inches = bool(self.settings.int_value(13))
+        decimals = 4 if inches else 3
+
+        def fmt(v: float) -> str:
+            return format_grbl_float(mm_to_inch(v) if inches else v, decimals)
+
+        def axes(values: Sequence[float]) -> str:
+            return ",".join(fmt(v) for v in values)
+
+        p = self.parser
+        lines = [f"[G{54 + i}:{axes(c)}]" for i, c in enumerate(p.coord_systems_mm)]
+        lines += [f"[G28:{axes(p.g28_mm)}]", f"[G30:{axes(p.g30_mm)}]"]
+        lines += [f"[G92:{axes(p.g92_offset_mm)}]", f"[TLO:{fmt(p.tool_length_offset_mm)}]"]
+        lines.append(f"[PRB:{axes((0.0,) * self.n_axes)}:0]")
+        return lines
+
+    def _eeprom_written(self) -> None:
+        """Tell the owner (e.g. `smoothjog sim --settings FILE`) that EEPROM data changed."""
+        if self.on_eeprom_write is not None:
+            self.on_eeprom_write(self.eeprom())
+
+    def _axis_limits(self) -> list[AxisLimits]:
+        """Motion limits from $100-$122; zeros are raised to a tiny value the planner accepts."""
+        limits = []
+        for i in range(self.n_axes):
+            axis = self.settings.axis(i)
+            # Assumption: Grbl accepts 0 here and then divides by it; the model keeps running.
+            limits.append(
+                AxisLimits(
+                    steps_per_mm=max(axis.steps_per_mm, 1e-3),
+                    max_rate_mm_min=max(axis.max_rate_mm_min, 1e-3),
+                    accel_mm_s2=max(axis.accel_mm_s2, 1e-3),
+                )
+            )
+        return limits
+
+    def _reconfigure_motion(self) -> None:
+        """New $1xx or $11 values reach the planner (only set in Idle/Alarm, so nothing moves)."""
+        self.motion.reconfigure(self._axis_limits(), self.settings[11])
+
+    # ------------------------------------------------------------------ homing
+    def _homed_position_mm(self) -> Vec:
+        """MPos after homing: -$27 for an axis homing to +, -$13x + $27 for one homing to -."""
+        pull_off = self.settings[27]
+        direction_mask = self.settings.int_value(23)
+        return tuple(
+            (-self.settings[130 + i] + pull_off) if direction_mask >> i & 1 else -pull_off
+            for i in range(self.n_axes)
+        )
+
+    def _homing_step(self, step: _Home, now_s: float) -> bool:
+        """`$H`: Z then X/Y seek their switch corner at $25, then pull off at $24 (§2).
+
+        Assumption: the switches sit at the corner of the current machine frame (MPos 0 for an
+        axis homing to +, -$13x for one homing to -), so homing sets the same MPos Grbl would.
+        The seek, locate and second pull-off of the real cycle are folded into one seek and one
+        pull-off; no status report is made meanwhile, as on the chip.
+        """
+        if not step.started:
+            step.started = True
+            self.state = HOMING
+            final = self._homed_position_mm()
+            step.final_mm = final
+            mask = self.settings.int_value(23)
+            switch = tuple(
+                -self.settings[130 + i] if mask >> i & 1 else 0.0 for i in range(self.n_axes)
+            )
+            pos = list(self.motion.planner_position_mm())
+            cycles = [[2], [i for i in range(self.n_axes) if i != 2]]
+            for axes in cycles:
+                seek = list(pos)
+                for i in axes:
+                    seek[i] = switch[i]
+                self.motion.plan_line(seek, self.settings[25])
+                pull = list(seek)
+                for i in axes:
+                    pull[i] = final[i]
+                self.motion.plan_line(pull, self.settings[24])
+                pos = pull
+            self.motion.start_cycle(now_s)
+            return True
+        if self._rt & EXEC_RESET:
+            self._checkpoint(now_s)
+            return True
+        if self.motion.is_running() or not self.motion.planner_empty():
+            return False
+        self.motion.set_position_mm(step.final_mm)
+        self.parser = self.parser.with_position(self.mpos_mm())
+        self._rt &= ~EXEC_CYCLE_STOP
+        self._steps.popleft()
+        self.state = IDLE
+        self._step_idle_delay(now_s)
+        self._steps.appendleft(_Call(self._run_startup_lines))
+        return True
+
+
+def _clip_per_axis(target_mm: Vec, box: TravelBox) -> Vec:
+    """FluidNC's constrain_jog: each axis clamped to its soft limits (facts §7).
+
+    Simplification: FluidNC's "nudge" for an axis already outside its limits is not modelled.
+    """
+    return tuple(
+        min(max(t, lo), hi) for t, lo, hi in zip(target_mm, box.min_mm, box.max_mm, strict=True)
+    )
+
+
+def _clip_along_line(start_mm: Vec, target_mm: Vec, box: TravelBox) -> Vec:
+    """grblHAL's `$40=1` jog limit: stop where the straight path leaves the envelope (facts §7)."""
+    fraction = 1.0
+    for s, t, lo, hi in zip(start_mm, target_mm, box.min_mm, box.max_mm, strict=True):
+        delta = t - s
+        if t > hi and delta > 0:
+            fraction = min(fraction, max(0.0, (hi - s) / delta))
+        elif t < lo and delta < 0:
+            fraction = min(fraction, max(0.0, (lo - s) / delta))
+    clipped = tuple(s + (t - s) * fraction for s, t in zip(start_mm, target_mm, strict=True))
+    return _clip_per_axis(clipped, box)

@@ -1,0 +1,249 @@
+"""Run the simulator in real time on asyncio, and serve it on a pseudo-terminal and/or TCP port.
+
+This module (with links/sim.py) is the only place the simulator meets a real clock: the rig's
+virtual time is the event loop's clock minus the moment the driver started.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import sys
+import termios
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from smoothjog.core.errors import SimError
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
+from smoothjog.sim.rig import LinkModel, SimRig
+from smoothjog.sim.settings import Eeprom, load_eeprom, save_eeprom
+
+_READ_CHUNK_BYTES = 4096
+
+
+class RealtimeSim:
+    """Drives a SimRig with the event loop's clock; received lines go to on_line."""
+
+    def __init__(self, rig: SimRig, on_line: Callable[[bytes], None]) -> None:
+        """Wrap a rig; nothing runs until run() is awaited."""
+        self.rig = rig
+        self.on_line = on_line
+        self._t0 = 0.0
+        self._start_rig_s = rig.now_s
+        self._wake: asyncio.Event | None = None
+        self._started = False
+
+    def now_s(self) -> float:
+        """The rig time that corresponds to the loop's clock now."""
+        return asyncio.get_running_loop().time() - self._t0 + self._start_rig_s
+
+    def send(self, data: bytes) -> None:
+        """Bytes from the host, sent now."""
+        if not self._started:
+            raise SimError("the simulator is not running yet")
+        self.rig.host_send(data, max(self.now_s(), self.rig.now_s))
+        if self._wake is not None:
+            self._wake.set()
+
+    async def run(self) -> None:
+        """Run forever (until cancelled), sleeping until the rig's next event or new input."""
+        loop = asyncio.get_running_loop()
+        self._t0 = loop.time()
+        self._start_rig_s = self.rig.now_s
+        self._wake = asyncio.Event()
+        self._started = True
+        while True:
+            now = max(self.now_s(), self.rig.now_s)
+            for _arrival_s, line in self.rig.run_until(now):
+                self.on_line(line)
+            nxt = self.rig.next_event_s()
+            self._wake.clear()
+            timeout = None if nxt is None else max(0.0, nxt - self.now_s())
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), timeout)
+
+
+@dataclass(frozen=True)
+class ServeOptions:
+    """What `smoothjog sim` was asked to do."""
+
+    firmware: str = "grbl"
+    machine: str = "grbl-defaults"
+    settings_path: Path | None = None
+    link_path: Path | None = None
+    pty: bool = True
+    tcp_port: int | None = None
+    baud: int = 115200
+
+
+def build_firmware(opts: ServeOptions) -> GrblFirmware:
+    """The firmware for these options, with EEPROM loaded from and saved to the settings file."""
+    profile = get_firmware_profile(opts.firmware)
+    machine = load_machine_profile(opts.machine)
+    path = opts.settings_path
+    eeprom = load_eeprom(path) if path is not None else None
+
+    def persist(image: Eeprom) -> None:
+        assert path is not None
+        save_eeprom(path, image)
+
+    return GrblFirmware(
+        profile, machine, eeprom=eeprom, on_eeprom_write=persist if path is not None else None
+    )
+
+
+class SimServer:
+    """The simulator on a pseudo-terminal and/or a loopback TCP port, until stopped."""
+
+    def __init__(self, opts: ServeOptions, *, out: Callable[[str], None] | None = None) -> None:
+        """Prepare; serve() opens the ports."""
+        self.opts = opts
+        self.out = out if out is not None else _print
+        self.firmware = build_firmware(opts)
+        self.rig = SimRig(self.firmware, LinkModel(baud=opts.baud))
+        self.sim = RealtimeSim(self.rig, self._on_line)
+        self._master_fd = -1
+        self._slave_fd = -1
+        self.pty_path: str | None = None
+        self._server: asyncio.Server | None = None
+        self.tcp_port: int | None = None
+        self._clients: set[asyncio.StreamWriter] = set()
+        self._symlink_made = False
+
+    async def serve(self, stop: asyncio.Event) -> None:
+        """Open the ports, run until stop is set, then close everything."""
+        loop = asyncio.get_running_loop()
+        runner = asyncio.create_task(self.sim.run())
+        try:
+            if self.opts.pty:
+                self._open_pty(loop)
+            if self.opts.tcp_port is not None:
+                self._server = await asyncio.start_server(
+                    self._on_client, "127.0.0.1", self.opts.tcp_port
+                )
+                self.tcp_port = self._server.sockets[0].getsockname()[1]
+            self.out(self._ready_message())
+            await stop.wait()
+        finally:
+            runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await runner
+            await self._close(loop)
+
+    def _ready_message(self) -> str:
+        """One line saying where to connect."""
+        where = []
+        if self.pty_path is not None:
+            link = f" (link {self.opts.link_path})" if self.opts.link_path else ""
+            where.append(f"pty {self.pty_path}{link}")
+        if self.tcp_port is not None:
+            where.append(f"tcp 127.0.0.1:{self.tcp_port}")
+        return (
+            f"smoothjog sim: {self.firmware.profile.banner} on {', '.join(where)};"
+            f" machine {self.firmware.machine.name}; Ctrl-C to stop"
+        )
+
+    def _open_pty(self, loop: asyncio.AbstractEventLoop) -> None:
+        """A raw pseudo-terminal whose far end behaves like the controller's serial port."""
+        master, slave = os.openpty()
+        # Raw mode: no echo, no CR/LF translation; the bytes are the controller's bytes.
+        tty.setraw(slave, termios.TCSANOW)
+        os.set_blocking(master, False)
+        self._master_fd, self._slave_fd = master, slave
+        self.pty_path = os.ttyname(slave)
+        if self.opts.link_path is not None:
+            link = self.opts.link_path
+            if link.is_symlink():
+                link.unlink()
+            elif link.exists():
+                raise SimError(f"--link {link} exists and is not a symlink; choose another path")
+            try:
+                link.symlink_to(self.pty_path)
+            except OSError as exc:
+                raise SimError(f"cannot create --link {link}: {exc.strerror}") from None
+            self._symlink_made = True
+        loop.add_reader(master, self._on_pty_readable)
+
+    def _on_pty_readable(self) -> None:
+        """Bytes from whoever has the pty open."""
+        try:
+            data = os.read(self._master_fd, _READ_CHUNK_BYTES)
+        except BlockingIOError:
+            return
+        except OSError:
+            return  # EIO while no client has the port open; the slave fd we hold keeps it alive
+        if data:
+            self.sim.send(data)
+
+    async def _on_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        """One TCP client: its bytes go to the controller; it gets every line it sends."""
+        self._clients.add(writer)
+        try:
+            while data := await reader.read(_READ_CHUNK_BYTES):
+                self.sim.send(data)
+        except ConnectionError:
+            pass
+        finally:
+            self._clients.discard(writer)
+            writer.close()
+
+    def _on_line(self, line: bytes) -> None:
+        """A line from the controller: to the pty and to every TCP client."""
+        data = line + b"\r\n"
+        if self._master_fd >= 0:
+            with contextlib.suppress(BlockingIOError, OSError):
+                # Nobody reading a full pty loses output, as a serial line with no listener would.
+                os.write(self._master_fd, data)
+        for writer in list(self._clients):
+            if not writer.is_closing():
+                writer.write(data)
+
+    async def _close(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Close ports, remove the symlink."""
+        if self._server is not None:
+            self._server.close()
+            for writer in list(self._clients):
+                writer.close()
+            await self._server.wait_closed()
+        if self._master_fd >= 0:
+            loop.remove_reader(self._master_fd)
+            os.close(self._master_fd)
+            os.close(self._slave_fd)
+            self._master_fd = self._slave_fd = -1
+        if self._symlink_made and self.opts.link_path is not None:
+            with contextlib.suppress(FileNotFoundError):
+                self.opts.link_path.unlink()
+            self._symlink_made = False
+
+
+def _print(text: str) -> None:
+    """Print a status line at once (a parent process may be waiting for it)."""
+    print(text, flush=True)
+
+
+async def serve_until_signal(opts: ServeOptions) -> int:
+    """Serve until SIGINT or SIGTERM; returns the exit code."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    received: list[str] = []
+
+    def on_signal(name: str) -> None:
+        received.append(name)
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal, sig.name)
+    server = SimServer(opts)
+    try:
+        await server.serve(stop)
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    why = received[0] if received else "request"
+    print(f"smoothjog sim: stopped on {why}", file=sys.stderr, flush=True)
+    return 0
