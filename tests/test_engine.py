@@ -1,0 +1,288 @@
+"""The jog engine against the simulator in virtual time: streaming, stopping, safety, tracking."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+
+from smoothjog.core.errors import JogBuildError
+from smoothjog.core.jogger import (
+    ContinuousIntent,
+    GotoIntent,
+    JogTuning,
+    Phase,
+    SendLine,
+    StepIntent,
+    StopIntent,
+)
+from smoothjog.core.machine import KeepOut
+from smoothjog.core.responses import GcodeModes
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile
+from smoothjog.sim.rig import LinkModel, SimRig
+from smoothjog.vsession import VirtualSession
+
+V_MM_S = 5000 / 60  # hobby router X/Y
+A_MM_S2 = 500.0
+STEP_MM = 1 / 80  # hobby router X/Y steps/mm
+
+
+def session(
+    firmware: str = "grbl", machine: str = "hobby-router", keepouts: tuple[KeepOut, ...] = ()
+) -> VirtualSession:
+    fw = GrblFirmware(get_firmware_profile(firmware), machine)
+    vs = VirtualSession(SimRig(fw, LinkModel()), keepouts=keepouts)
+    vs.handshake()
+    return vs
+
+
+def sent_lines(vs: VirtualSession) -> list[str]:
+    """Every line the engine sends from now on (wraps the rig)."""
+    lines: list[str] = []
+    original = vs.rig.host_send
+
+    def spy(data: bytes, now_s: float) -> float:
+        if data.endswith(b"\n"):
+            lines.append(data.decode().strip())
+        return original(data, now_s)
+
+    vs.rig.host_send = spy  # type: ignore[method-assign]
+    return lines
+
+
+def gcode_words(vs: VirtualSession) -> tuple[str, ...]:
+    return next(r.words for r in vs.query_line("$G") if isinstance(r, GcodeModes))
+
+
+def test_every_jog_line_names_units_and_distance_mode() -> None:
+    vs = session()
+    lines = sent_lines(vs)
+    vs.set_intent(ContinuousIntent({"X": -1.0, "Y": -0.5}, 0.7))
+    vs.run_until(vs.now_s + 1.0)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(3.0)
+    jogs = [line for line in lines if line.startswith("$J=")]
+    assert len(jogs) > 20
+    assert all(line.startswith("$J=G21G91") and "F" in line for line in jogs)
+    assert "G4P0" in lines  # the stop's sync point
+
+
+def test_modal_state_is_unchanged_by_a_session() -> None:
+    vs = session()
+    vs.query_line("G20")  # a modal state a jog line must not depend on or change
+    vs.query_line("G90")
+    before = gcode_words(vs)
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 0.7)
+    vs.set_intent(ContinuousIntent({"X": 1.0, "Z": -0.5}, 0.4))
+    vs.run_until(vs.now_s + 0.3)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(3.0)
+    vs.set_intent(StepIntent("Y", -2.5))
+    assert vs.run_until_idle(3.0)
+    assert gcode_words(vs) == before
+    assert "G20" in before
+    assert "G90" in before
+
+
+def test_release_at_full_speed_stops_like_the_firmware_floor_with_no_restart() -> None:
+    vs = session()
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.0)
+    t_release = vs.now_s
+    x_release = vs.rig.firmware.mpos_mm()[0]
+    vs.set_intent(ContinuousIntent({"X": 0.0}))
+    assert vs.run_until_idle(3.0)
+    vs.run_until(vs.now_s + 0.5)
+    dist = x_release - vs.rig.firmware.mpos_mm()[0]
+    # The firmware floor: ≤ 50 ms of committed segments at v, then v²/2a.
+    assert dist <= V_MM_S * 0.055 + V_MM_S**2 / (2 * A_MM_S2)
+    moving_after = [s for s in vs.rig.trace if s.t0_s > t_release and s.speed_mm_s > 0]
+    # One continuous deceleration: no pause followed by more motion (a ghost jog).
+    for a, b in itertools.pairwise(moving_after):
+        assert b.t0_s - a.t1_s < 1e-9
+    engine = vs.engine
+    assert engine is not None
+    assert engine.stats.stops[-1].cancelled
+    assert engine.stats.stops[-1].tracked_error_mm <= STEP_MM
+    assert engine.stats.recancels == 0
+
+
+def test_held_jog_never_dips_below_the_commanded_speed() -> None:
+    vs = session()
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    t0 = vs.now_s
+    vs.run_until(t0 + 4.0)
+    vs.set_intent(StopIntent())
+    vs.run_until_idle(3.0)
+    held = [s for s in vs.rig.trace if t0 + 0.3 < s.t0_s and s.t1_s < t0 + 4.0]
+    assert held
+    assert min(s.speed_mm_s for s in held) >= 0.98 * V_MM_S
+
+
+def test_queue_is_just_what_holding_speed_needs() -> None:
+    vs = session()
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.5)
+    engine = vs.engine
+    assert engine is not None
+    queued = engine.view(vs.now_s).queued_mm
+    stop_mm = V_MM_S**2 / (2 * A_MM_S2)
+    assert stop_mm < queued < stop_mm + V_MM_S * 0.1  # v²/2a plus at most 100 ms of travel
+
+
+def test_diagonal_never_runs_faster_than_asked() -> None:
+    vs = session()
+    lines = sent_lines(vs)
+    vs.set_intent(ContinuousIntent({"X": -1.0, "Y": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.5)
+    feeds = {float(line.split("F")[1]) for line in lines if line.startswith("$J=")}
+    # Asked: 5000 mm/min on each axis = 7071 along the diagonal; Grbl caps the vector at
+    # 5000/0.7071 = 7071, so the request fits exactly and no axis exceeds its 5000.
+    assert max(feeds) <= 5000 * math.sqrt(2) + 0.01
+    held = [s for s in vs.rig.trace if s.t0_s > vs.now_s - 0.5]
+    for seg in held:
+        dt = seg.t1_s - seg.t0_s
+        vx = abs(seg.end_mm[0] - seg.start_mm[0]) / dt
+        assert vx <= V_MM_S * 1.001
+
+
+def test_steps_are_exact_and_tracked() -> None:
+    vs = session()
+    start = vs.rig.firmware.mpos_mm()
+    for d in (-0.1, -0.1, -1.0, -10.0, 0.0125):
+        vs.set_intent(StepIntent("X", d, 0.5))
+    assert vs.run_until_idle(5.0)
+    end = vs.rig.firmware.mpos_mm()
+    assert end[0] - start[0] == pytest.approx(-11.1875, abs=STEP_MM / 2)
+    engine = vs.engine
+    assert engine is not None
+    assert engine.stats.stops[-1].tracked_error_mm <= STEP_MM
+
+
+def test_goto_moves_in_machine_coordinates() -> None:
+    vs = session()
+    vs.set_intent(GotoIntent({"X": -123.45, "Y": -67.8}, 0.8))
+    assert vs.run_until_idle(10.0)
+    pos = vs.rig.firmware.mpos_mm()
+    assert pos[0] == pytest.approx(-123.45, abs=STEP_MM)
+    assert pos[1] == pytest.approx(-67.8, abs=STEP_MM)
+
+
+def test_jog_into_the_soft_limit_stops_at_the_edge_without_error_15() -> None:
+    vs = session()  # homed at the + corner, MPos -1, soft limits on: + has 1 mm of room
+    vs.set_intent(ContinuousIntent({"X": 1.0, "Y": 1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.0)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(3.0)
+    engine = vs.engine
+    assert engine is not None
+    assert engine.stats.soft_limit_errors == 0
+    pos = vs.rig.firmware.mpos_mm()
+    assert -2 * STEP_MM <= pos[0] <= 0.0
+    assert -2 * STEP_MM <= pos[1] <= 0.0
+
+
+def test_keep_out_zone_is_never_entered_and_the_jog_slides_along_it() -> None:
+    zone = KeepOut("vise", (-60.0, -30.0, -100.0), (-20.0, 10.0, 0.0))
+    vs = session(keepouts=(zone,))
+    vs.set_intent(ContinuousIntent({"X": -1.0, "Y": -0.2}, 1.0))
+    vs.run_until(vs.now_s + 1.5)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(3.0)
+    for seg in vs.rig.trace:
+        for p in (seg.start_mm, seg.end_mm):
+            assert not (-60 < p[0] < -20 and -30 < p[1] < 10), f"entered the zone at {p}"
+    pos = vs.rig.firmware.mpos_mm()
+    assert pos[0] == pytest.approx(-20.0, abs=2 * STEP_MM)  # stopped at the zone's face
+    assert pos[1] < -1.0 - 1.0  # and slid on along -Y
+
+
+@pytest.mark.parametrize("firmware", ["grbl", "grblhal", "fluidnc"])
+def test_random_press_release_reverse_is_safe_on_every_firmware(firmware: str) -> None:
+    from bench.fuzz import run_fuzz
+
+    report = run_fuzz(firmware, sequences=40, seed=7)
+    assert report.sequences == 40
+    assert report.clean, report
+
+
+def test_unhomed_machine_with_soft_limits_is_explained_not_jogged(tmp_path: object) -> None:
+    fw = GrblFirmware(get_firmware_profile("grbl"), "hobby-router")
+    vs = VirtualSession(SimRig(fw, LinkModel()))
+    vs.handshake()
+    vs.query_line("G53G0X0Y0Z0")  # MPos 0,0,0: what a power-up without homing looks like
+    vs.run_until(vs.now_s + 1.0)
+    engine = vs.engine
+    assert engine is not None
+    ok, reason = engine.can_jog()
+    assert not ok
+    assert reason is not None
+    assert "home" in reason
+    lines = sent_lines(vs)
+    vs.set_intent(ContinuousIntent({"X": -1.0}))
+    vs.run_until(vs.now_s + 0.3)
+    assert not [line for line in lines if line.startswith("$J=")]
+
+
+def test_alarm_state_blocks_jogging_with_a_reason() -> None:
+    vs = session(machine="hobby-router")
+    # A G-code move beyond the soft limit: ALARM:2, and no ok until a reset (facts §2).
+    vs.rig.host_send(b"G53G0X-1000\n", vs.now_s)
+    vs.run_until(vs.now_s + 1.0)
+    vs.rig.host_send(b"\x18", vs.now_s)
+    vs.run_until(vs.now_s + 1.0)
+    engine = vs.engine
+    assert engine is not None
+    ok, reason = engine.can_jog()
+    assert not ok
+    assert reason is not None
+    assert "Alarm" in reason
+
+
+def test_invalid_intents_are_refused_with_a_sentence() -> None:
+    vs = session()
+    engine = vs.engine
+    assert engine is not None
+    for bad in (
+        ContinuousIntent({"Q": 1.0}),
+        ContinuousIntent({"X": 2.0}),
+        ContinuousIntent({"X": 1.0}, 0.0),
+        StepIntent("X", 500.0),
+        StepIntent("X", 0.0001),
+        GotoIntent({"X": math.nan}),
+    ):
+        with pytest.raises(JogBuildError):
+            engine.set_intent(bad, vs.now_s)
+    assert engine.phase is Phase.IDLE
+
+
+def test_poll_output_is_deterministic() -> None:
+    def run() -> list[str]:
+        vs = session()
+        lines = sent_lines(vs)
+        vs.set_intent(ContinuousIntent({"X": -0.8, "Y": -0.3}, 0.9))
+        vs.run_until(vs.now_s + 0.8)
+        vs.set_intent(StopIntent())
+        vs.run_until_idle(3.0)
+        return lines
+
+    assert run() == run()
+
+
+def test_engine_outputs_are_lines_and_realtime_bytes_only() -> None:
+    vs = session()
+    engine = vs.engine
+    assert engine is not None
+    engine.set_intent(ContinuousIntent({"X": -1.0}), vs.now_s)
+    out = engine.poll(vs.now_s)
+    assert out
+    assert all(isinstance(o, SendLine) or o.byte in (b"?", b"\x85") for o in out)
+
+
+def test_tuning_defaults_follow_the_firmware_facts() -> None:
+    tuning = JogTuning()
+    assert tuning.committed_s == pytest.approx(0.05)  # 5 segments of 10 ms (facts §4.1)
+    assert tuning.planner_reserve_blocks >= 1
