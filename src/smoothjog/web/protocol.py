@@ -1,0 +1,183 @@
+"""The pendant's WebSocket messages: parse and validate what the page sends, shape what it gets.
+
+Every client message is checked here before anything reaches the backend, so a malformed or
+hostile message becomes a PendantMessageError (answered with an error message) and never a call.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from smoothjog.core.errors import SmoothjogError
+
+#: Bounds of a step jog in mm; outside them a click is surely a mistake (a typo or a bad unit).
+STEP_MIN_MM: Final = 0.001
+STEP_MAX_MM: Final = 100.0
+#: The largest message the page ever needs; anything bigger is refused unread.
+MAX_MESSAGE_BYTES: Final = 4096
+
+
+class PendantError(SmoothjogError):
+    """The pendant could not start or was misused (bad address, bad setting)."""
+
+
+class PendantMessageError(PendantError):
+    """A message from the page is malformed or out of range; the text is sent back to it."""
+
+
+@dataclass(frozen=True)
+class JogMessage:
+    """Hold a continuous jog: deflection per axis in [-1, 1] at a speed fraction in (0, 1]."""
+
+    axes: Mapping[str, float]
+    speed: float
+
+    @property
+    def neutral(self) -> bool:
+        """True when every deflection is zero (the same as a stop)."""
+        return all(v == 0.0 for v in self.axes.values())
+
+
+@dataclass(frozen=True)
+class StopMessage:
+    """Return to neutral now."""
+
+
+@dataclass(frozen=True)
+class StepMessage:
+    """Move one axis by an exact distance."""
+
+    axis: str
+    dist_mm: float
+
+
+@dataclass(frozen=True)
+class RatiosMessage:
+    """Set the per-axis speed ratios, each in (0, 1]."""
+
+    ratios: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class TakeControlMessage:
+    """A watcher asks to become the controlling client."""
+
+
+ClientMessage = JogMessage | StopMessage | StepMessage | RatiosMessage | TakeControlMessage
+
+
+def _reject_constant(name: str) -> float:
+    """json.loads hook: NaN and Infinity are not JSON and never a valid jog value."""
+    raise PendantMessageError(f"{name} is not a number the pendant accepts; send a finite number")
+
+
+def _number(value: object, what: str) -> float:
+    """A finite JSON number (bool is refused although Python counts it as an int)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise PendantMessageError(f"{what} must be a number, got {json.dumps(value)}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise PendantMessageError(f"{what} must be finite, got {number}")
+    return number
+
+
+def _axis(value: object, known_axes: Sequence[str], what: str) -> str:
+    """An axis letter this machine has."""
+    if not isinstance(value, str) or value not in known_axes:
+        raise PendantMessageError(
+            f"{what} must be one of {', '.join(known_axes)}, got {json.dumps(value)}"
+        )
+    return value
+
+
+def _axis_map(
+    value: object, known_axes: Sequence[str], what: str, lo: float, hi: float, *, open_lo: bool
+) -> dict[str, float]:
+    """An object of axis letter -> number within [lo, hi] (or (lo, hi] with open_lo)."""
+    if not isinstance(value, dict) or not value:
+        raise PendantMessageError(f'{what} must be a non-empty object like {{"X": 0.5}}')
+    out: dict[str, float] = {}
+    for key, raw in value.items():
+        axis = _axis(key, known_axes, f"{what} key")
+        number = _number(raw, f"{what}.{axis}")
+        if number > hi or number < lo or (open_lo and number == lo):
+            bracket = "(" if open_lo else "["
+            raise PendantMessageError(
+                f"{what}.{axis} must be in {bracket}{lo:g}, {hi:g}], got {number:g}"
+            )
+        out[axis] = number
+    return out
+
+
+def parse_client_message(text: str | bytes, known_axes: Sequence[str]) -> ClientMessage:
+    """Parse one WebSocket text frame from the page, or raise PendantMessageError saying why."""
+    if len(text) > MAX_MESSAGE_BYTES:
+        raise PendantMessageError(f"message longer than {MAX_MESSAGE_BYTES} bytes refused")
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except (ValueError, RecursionError) as exc:
+        raise PendantMessageError(f"message is not valid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise PendantMessageError('message must be a JSON object with a "type" field')
+    kind = data.get("type")
+    if kind == "jog":
+        axes = _axis_map(data.get("axes"), known_axes, "axes", -1.0, 1.0, open_lo=False)
+        speed = _number(data.get("speed"), "speed")
+        if not 0.0 < speed <= 1.0:
+            raise PendantMessageError(f"speed must be in (0, 1], got {speed:g}")
+        return JogMessage(axes=axes, speed=speed)
+    if kind == "stop":
+        return StopMessage()
+    if kind == "step":
+        axis = _axis(data.get("axis"), known_axes, "axis")
+        dist_mm = _number(data.get("dist_mm"), "dist_mm")
+        if not STEP_MIN_MM <= abs(dist_mm) <= STEP_MAX_MM:
+            raise PendantMessageError(
+                f"dist_mm must be between {STEP_MIN_MM:g} and {STEP_MAX_MM:g} mm "
+                f"(either sign), got {dist_mm:g}"
+            )
+        return StepMessage(axis=axis, dist_mm=dist_mm)
+    if kind == "ratios":
+        ratios = _axis_map(data.get("ratios"), known_axes, "ratios", 0.0, 1.0, open_lo=True)
+        return RatiosMessage(ratios=ratios)
+    if kind == "take_control":
+        return TakeControlMessage()
+    raise PendantMessageError(
+        f"unknown message type {json.dumps(kind)}; expected jog, stop, step, ratios or take_control"
+    )
+
+
+def _finite_or_none(value: object) -> object:
+    """Replace NaN and infinities (which JSON cannot carry) by null, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_none(v) for v in value]
+    return value
+
+
+def view_message(view: Mapping[str, object]) -> dict[str, object]:
+    """The server->client view message: the backend's snapshot plus "type": "view"."""
+    body = {str(k): _finite_or_none(v) for k, v in view.items()}
+    return {"type": "view", **body}
+
+
+def role_message(role: str, *, controlled: bool, deadman_s: float) -> dict[str, object]:
+    """Tell a client its role; `controlled` says whether some client holds control."""
+    return {"type": "role", "role": role, "controlled": controlled, "deadman_s": deadman_s}
+
+
+def error_message(text: str) -> dict[str, object]:
+    """An error in words for the page to show."""
+    return {"type": "error", "text": text}
+
+
+def dumps(message: Mapping[str, object]) -> str:
+    """Serialise a server message; unknown objects become their str() rather than a crash."""
+    return json.dumps(message, default=str, allow_nan=False, separators=(",", ":"))

@@ -1,0 +1,126 @@
+// The jog mixer: sums every input's deflection into one intent and owns the heartbeat and stop.
+//
+// Each input (XY stick, Z stick, keys, gamepad) sets its own contribution; the mixer sends a jog
+// when the sum changes, repeats it every heartbeat while it is non-zero (the server's dead-man
+// stops the machine when the repeats stop), and sends one stop the moment the sum returns to zero.
+
+import { clamp, round3 } from "./shaping.js";
+
+/** Never send two jogs closer than this; a pointer can move at 120 Hz. */
+const MIN_GAP_MS = 20;
+
+export class JogMixer {
+  /** send(message) delivers one JSON message; heartbeatMs is the repeat period while held. */
+  constructor(send, { heartbeatMs = 40 } = {}) {
+    this.send = send;
+    this.heartbeatMs = heartbeatMs;
+    this.axes = ["X", "Y", "Z"];
+    this.sources = new Map();
+    this.enabled = false;
+    this.speed = 0.25;
+    this.active = false;
+    this.last = null;
+    this.lastSentAt = 0;
+    this.timer = null;
+    this.onActivity = () => {};
+  }
+
+  /** Allow or forbid motion; forbidding drops every contribution and stops at once. */
+  setEnabled(on) {
+    if (this.enabled === on) return;
+    this.enabled = on;
+    if (!on) {
+      this.sources.clear();
+      this._update();
+    }
+  }
+
+  /** Set the global speed fraction in (0, 1]; a held jog is resent with it. */
+  setSpeed(fraction) {
+    this.speed = clamp(fraction, 0.01, 1);
+    if (this.active) this._sendJog();
+  }
+
+  /** One input's contribution, e.g. set("keys", {X: 1, Y: 0}). */
+  set(source, axes) {
+    if (!this.enabled) return;
+    this.sources.set(source, axes);
+    this._update();
+  }
+
+  /** Remove one input's contribution (its finger lifted, its key released). */
+  clear(source) {
+    if (this.sources.delete(source)) this._update();
+  }
+
+  /** Drop every contribution and send a stop even if nothing was held (the STOP button). */
+  stopAll() {
+    this.sources.clear();
+    this._cancelTimer();
+    this.active = false;
+    this.last = null;
+    this.send({ type: "stop" });
+    this.onActivity(false);
+  }
+
+  total() {
+    const out = {};
+    for (const axis of this.axes) out[axis] = 0;
+    for (const contribution of this.sources.values()) {
+      for (const [axis, v] of Object.entries(contribution)) {
+        if (axis in out && Number.isFinite(v)) out[axis] += v;
+      }
+    }
+    for (const axis of this.axes) out[axis] = round3(clamp(out[axis], -1, 1));
+    return out;
+  }
+
+  _update() {
+    const t = this.total();
+    const moving = this.enabled && Object.values(t).some((v) => v !== 0);
+    if (!moving) {
+      if (this.active) {
+        this.active = false;
+        this.last = null;
+        this._cancelTimer();
+        this.send({ type: "stop" });
+        this.onActivity(false);
+      }
+      return;
+    }
+    const changed = !this.last || this.axes.some((a) => this.last[a] !== t[a]);
+    this.last = t;
+    if (!this.active) {
+      this.active = true;
+      this.onActivity(true);
+      this._sendJog();
+    } else if (changed) {
+      const wait = this.lastSentAt + MIN_GAP_MS - performance.now();
+      if (wait <= 0) this._sendJog();
+      else this._arm(wait);
+    }
+  }
+
+  _sendJog() {
+    if (!this.last) return;
+    this.send({ type: "jog", axes: { ...this.last }, speed: round3(this.speed) });
+    this.lastSentAt = performance.now();
+    this._arm(this.heartbeatMs);
+  }
+
+  _arm(delayMs) {
+    this._cancelTimer();
+    // Each send re-arms the heartbeat, so a held jog repeats every heartbeatMs at most.
+    this.timer = setTimeout(() => {
+      this.timer = null;
+      if (this.active) this._sendJog();
+    }, delayMs);
+  }
+
+  _cancelTimer() {
+    if (this.timer !== null) {
+      clearTimeout(this.timer);
+      this.timer = null;
+    }
+  }
+}

@@ -1,0 +1,186 @@
+"""A PendantBackend that records every call with its loop-clock time and serves a scripted view.
+
+It also integrates a crude motion (position follows the held jog, actual speed lags commanded)
+so the page has something alive to draw; it models nothing of Grbl.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+AXES = ("X", "Y", "Z")
+
+
+@dataclass(frozen=True)
+class Call:
+    """One backend call: when (loop clock), which method, with what."""
+
+    t_s: float
+    name: str
+    args: tuple[object, ...]
+
+
+def default_view() -> dict[str, object]:
+    """A plausible idle machine with soft limits and two keep-out zones."""
+    return {
+        "t_s": 0.0,
+        "firmware": "Grbl 1.1h (recording backend)",
+        "axes": list(AXES),
+        "state": "Idle",
+        "substate": None,
+        "can_jog": True,
+        "reason": None,
+        "units": "mm",
+        "mpos": [-150.0, -100.0, -10.0],
+        "wpos": [50.0, 40.0, 5.0],
+        "feed_mm_min": 0.0,
+        "commanded_speed_mm_s": 0.0,
+        "actual_speed_mm_s": 0.0,
+        "stop_point_mpos": None,
+        "queue": {"queued_mm": 0.0, "blocks": 0, "planner_blocks": 15},
+        "fault": None,
+        "envelope": {"min_mm": [-300.0, -200.0, -80.0], "max_mm": [0.0, 0.0, 0.0]},
+        "keepouts": [
+            {"name": "vise", "min_mm": [-120.0, -60.0, -80.0], "max_mm": [-60.0, -20.0, 0.0]},
+            {"name": "probe", "min_mm": [-290.0, -190.0, -80.0], "max_mm": [-270.0, -170.0, 0.0]},
+        ],
+        "max_rate_mm_min": [3000.0, 3000.0, 1000.0],
+        "speed_ratios": {"X": 1.0, "Y": 1.0, "Z": 0.25},
+        "moving": False,
+    }
+
+
+class RecordingBackend:
+    """Records calls; `view_state` is the scriptable snapshot (t_s and motion are filled in)."""
+
+    def __init__(self, *, animate: bool = True) -> None:
+        self.calls: list[Call] = []
+        self.view_state: dict[str, object] = default_view()
+        self.animate = animate
+        self.fail_on: set[str] = set()
+        self._held: tuple[dict[str, float], float] | None = None
+        self._last_view_s: float | None = None
+
+    @staticmethod
+    def now_s() -> float:
+        """The loop clock, the same one the server's dead-man uses."""
+        return asyncio.get_running_loop().time()
+
+    def _record(self, name: str, *args: object) -> None:
+        self.calls.append(Call(self.now_s(), name, args))
+        if name in self.fail_on:
+            raise RuntimeError(f"recording backend told to fail on {name}")
+
+    # -- PendantBackend ------------------------------------------------------------------------
+
+    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
+        """Record and hold the jog."""
+        self._record("jog_continuous", dict(axes), speed)
+        self._held = (dict(axes), speed)
+
+    def jog_step(self, axis: str, dist_mm: float) -> None:
+        """Record the step."""
+        self._record("jog_step", axis, dist_mm)
+
+    def stop(self) -> None:
+        """Record the stop and release the held jog."""
+        self._record("stop")
+        self._held = None
+
+    def view(self) -> Mapping[str, object]:
+        """The scripted view, advanced by the crude motion when animate is on."""
+        now_s = self.now_s()
+        if "view" in self.fail_on:
+            raise RuntimeError("recording backend view is broken")
+        if self.animate:
+            self._advance(now_s)
+        self._last_view_s = now_s
+        return {**self.view_state, "t_s": now_s}
+
+    def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
+        """Record the ratios and show them in the view."""
+        self._record("set_speed_ratios", dict(ratios))
+        self.view_state["speed_ratios"] = {**self.ratios(), **ratios}
+
+    # -- helpers for tests ---------------------------------------------------------------------
+
+    def ratios(self) -> dict[str, float]:
+        """The current speed ratios."""
+        raw = self.view_state["speed_ratios"]
+        assert isinstance(raw, dict)
+        return {str(k): float(v) for k, v in raw.items()}
+
+    def set_view(self, **changes: object) -> None:
+        """Change some keys of the scripted view."""
+        self.view_state.update(changes)
+
+    def named(self, name: str, since_s: float = -math.inf) -> list[Call]:
+        """The calls of one method at or after since_s."""
+        return [c for c in self.calls if c.name == name and c.t_s >= since_s]
+
+    def jogs(self, since_s: float = -math.inf) -> list[dict[str, float]]:
+        """The axes of every jog_continuous call at or after since_s."""
+        out: list[dict[str, float]] = []
+        for c in self.named("jog_continuous", since_s):
+            axes = c.args[0]
+            assert isinstance(axes, dict)
+            out.append(axes)
+        return out
+
+    async def wait_for(
+        self, predicate: Callable[[], object], timeout_s: float = 5.0, what: str = "condition"
+    ) -> None:
+        """Poll predicate on the loop until it is true; fail with the call log if it never is."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while not predicate():
+            if loop.time() > deadline:
+                tail = "\n".join(f"  {c.t_s:.3f} {c.name} {c.args}" for c in self.calls[-15:])
+                raise AssertionError(f"timed out waiting for {what}; last calls:\n{tail}")
+            await asyncio.sleep(0.01)
+
+    def _advance(self, now_s: float) -> None:
+        dt_s = 0.0 if self._last_view_s is None else min(now_s - self._last_view_s, 0.2)
+        mpos = [float(v) for v in self.view_state["mpos"]]  # type: ignore[attr-defined]
+        wpos = [float(v) for v in self.view_state["wpos"]]  # type: ignore[attr-defined]
+        rates = [float(v) / 60.0 for v in self.view_state["max_rate_mm_min"]]  # type: ignore[attr-defined]
+        ratios = self.ratios()
+        velocity = [0.0] * len(AXES)
+        if self._held is not None and self.view_state.get("can_jog"):
+            axes, speed = self._held
+            for i, a in enumerate(AXES):
+                velocity[i] = axes.get(a, 0.0) * speed * rates[i] * ratios.get(a, 1.0)
+        commanded = math.sqrt(sum(v * v for v in velocity))
+        previous = float(self.view_state["actual_speed_mm_s"])  # type: ignore[arg-type]
+        # First-order lag of about 0.15 s stands in for acceleration.
+        actual = previous + (commanded - previous) * min(1.0, dt_s / 0.15)
+        scale = actual / commanded if commanded > 0 else 0.0
+        for i in range(len(AXES)):
+            mpos[i] += velocity[i] * scale * dt_s
+            wpos[i] += velocity[i] * scale * dt_s
+        moving = actual > 0.01
+        stop = [p + v * scale * 0.3 for p, v in zip(mpos, velocity, strict=True)]
+        self.view_state.update(
+            {
+                "mpos": mpos,
+                "wpos": wpos,
+                "commanded_speed_mm_s": commanded,
+                "actual_speed_mm_s": actual if moving else 0.0,
+                "feed_mm_min": commanded * 60.0,
+                "moving": moving,
+                "state": "Jog" if moving else self._rest_state(),
+                "stop_point_mpos": stop if moving else None,
+                "queue": {
+                    "queued_mm": commanded * 0.3,
+                    "blocks": 6 if moving else 0,
+                    "planner_blocks": 15,
+                },
+            }
+        )
+
+    def _rest_state(self) -> object:
+        state = self.view_state.get("state")
+        return "Idle" if state == "Jog" else state

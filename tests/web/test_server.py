@@ -1,0 +1,402 @@
+"""The pendant server without a browser: access rules, roles, dead-man, view stream, failures."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import pytest
+import pytest_asyncio
+
+from smoothjog.web.protocol import PendantError
+from smoothjog.web.server import STATIC_DIR, format_banner, run_pendant
+from tests.web.conftest import Pendant, StartPendant
+from tests.web.recording import RecordingBackend
+
+JOG_X = {"type": "jog", "axes": {"X": 0.5}, "speed": 0.5}
+
+
+@pytest_asyncio.fixture(loop_scope="session")
+async def http() -> AsyncIterator[aiohttp.ClientSession]:
+    """A plain HTTP client that keeps cookies even for the 127.0.0.1 IP address."""
+    async with aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as session:
+        yield session
+
+
+async def open_ws(
+    http: aiohttp.ClientSession, p: Pendant, *, origin: str | None = "same", query: str = ""
+) -> aiohttp.ClientWebSocketResponse:
+    """Open /ws as the page would (Origin of the page) unless told otherwise."""
+    headers = {}
+    if origin is not None:
+        headers["Origin"] = p.origin if origin == "same" else origin
+    return await http.ws_connect(p.base_url + "ws" + query, headers=headers)
+
+
+async def next_message(
+    ws: aiohttp.ClientWebSocketResponse, kind: str, timeout_s: float = 3.0
+) -> dict[str, Any]:
+    """The next server message of one type, skipping the others."""
+    async with asyncio.timeout(timeout_s):
+        while True:
+            msg = await ws.receive()
+            assert msg.type == aiohttp.WSMsgType.TEXT, f"socket ended: {msg}"
+            data: dict[str, Any] = json.loads(msg.data)
+            if data["type"] == kind:
+                return data
+
+
+async def until_role(ws: aiohttp.ClientWebSocketResponse, role: str) -> None:
+    """Read role messages (each broadcast of roles sends one) until the given role arrives."""
+    while (await next_message(ws, "role"))["role"] != role:
+        pass
+
+
+async def send(ws: aiohttp.ClientWebSocketResponse, message: dict[str, Any] | str) -> None:
+    """Send a message (a dict as JSON, a str as is)."""
+    await ws.send_str(message if isinstance(message, str) else json.dumps(message))
+
+
+# -- access ---------------------------------------------------------------------------------------
+
+
+async def test_page_and_assets_are_served_with_a_strict_policy(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    async with http.get(p.base_url) as r:
+        assert r.status == 200
+        html = await r.text()
+        assert "default-src 'self'" in r.headers["Content-Security-Policy"]
+        assert "frame-ancestors 'none'" in r.headers["Content-Security-Policy"]
+    assert '<script type="module" src="/static/app.js">' in html
+    for name in ("app.js", "style.css", "mixer.js", "stick.js"):
+        async with http.get(p.base_url + "static/" + name) as r:
+            assert r.status == 200, name
+    async with http.get(p.base_url + "static/../server.py") as r:
+        assert r.status in {403, 404}
+
+
+def test_static_files_fetch_nothing_from_outside() -> None:
+    for path in STATIC_DIR.iterdir():
+        text = path.read_text(encoding="utf-8")
+        assert "http://" not in text, path.name
+        assert "https://" not in text, path.name
+        assert "//cdn" not in text, path.name
+
+
+async def test_websocket_from_another_origin_is_refused_before_upgrade(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    for origin in ("http://evil.example", "null", f"http://localhost:{p.port}", None):
+        with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+            await open_ws(http, p, origin=origin)
+        assert info.value.status == 403, origin
+    assert p.hub.clients == []
+    assert p.backend.calls == []
+
+
+async def test_allowed_origins_extend_the_rule(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(allowed_origins={"https://pendant.example"})
+    ws = await open_ws(http, p, origin="https://pendant.example")
+    assert (await next_message(ws, "role"))["role"] == "controller"
+    await ws.close()
+
+
+async def test_a_rebound_dns_name_is_refused_without_a_token(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    async with http.get(p.base_url, headers={"Host": f"evil.example:{p.port}"}) as r:
+        assert r.status == 403
+        assert "pairing token" in await r.text()
+
+
+async def test_token_is_required_for_page_and_websocket(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(token="s3cret-token")
+    for url in (p.base_url, p.base_url + "?token=wrong", p.base_url + "static/app.js"):
+        async with http.get(url) as r:
+            assert r.status == 403, url
+    for query in ("", "?token=wrong"):
+        with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+            await open_ws(http, p, query=query)
+        assert info.value.status == 403
+    # The right token: moved into an HttpOnly cookie, then everything works with the cookie.
+    async with http.get(p.url, allow_redirects=False) as r:
+        assert r.status == 303
+        assert r.headers["Location"] == "/"
+        cookie = r.headers["Set-Cookie"]
+        assert "HttpOnly" in cookie
+        assert "SameSite=Strict" in cookie
+    async with http.get(p.base_url) as r:
+        assert r.status == 200
+    ws = await open_ws(http, p)
+    assert (await next_message(ws, "role"))["role"] == "controller"
+    await ws.close()
+
+
+async def test_token_in_the_websocket_query_works_without_a_cookie(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(token="abc")
+    ws = await open_ws(http, p, query="?token=abc")
+    assert (await next_message(ws, "role"))["role"] == "controller"
+    await ws.close()
+
+
+# -- messages and roles ---------------------------------------------------------------------------
+
+
+async def test_malformed_messages_get_an_error_and_the_socket_lives_on(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    for bad in ("{", '{"type":"jog","axes":{"X":2},"speed":1}', '{"type":"step"}'):
+        await send(ws, bad)
+        assert (await next_message(ws, "error"))["text"]
+    await ws.send_bytes(b"\x00\x01")
+    assert "binary" in (await next_message(ws, "error"))["text"]
+    assert p.backend.calls == []
+    await send(ws, {"type": "step", "axis": "Y", "dist_mm": -0.1})
+    await p.backend.wait_for(lambda: p.backend.named("jog_step"), what="the step")
+    assert p.backend.named("jog_step")[0].args == ("Y", -0.1)
+    await ws.close()
+
+
+async def test_intents_reach_the_backend(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, {"type": "ratios", "ratios": {"X": 1, "Y": 1, "Z": 0.25}})
+    await send(ws, JOG_X)
+    await send(ws, {"type": "stop"})
+    await backend.wait_for(lambda: backend.named("stop"), what="the stop")
+    assert [c.name for c in backend.calls] == ["set_speed_ratios", "jog_continuous", "stop"]
+    assert backend.calls[1].args == ({"X": 0.5}, 0.5)
+    await ws.close()
+
+
+async def test_a_watcher_cannot_jog_and_gets_control_when_the_jog_ends(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(deadman_s=2.0)
+    backend: RecordingBackend = p.backend
+    first = await open_ws(http, p)
+    assert (await next_message(first, "role"))["role"] == "controller"
+    second = await open_ws(http, p)
+    role = await next_message(second, "role")
+    assert role == {"type": "role", "role": "watcher", "controlled": True, "deadman_s": 2.0}
+    for message in (JOG_X, {"type": "step", "axis": "X", "dist_mm": 1}, {"type": "stop"}):
+        await send(second, message)
+        assert "watching only" in (await next_message(second, "error"))["text"]
+    assert backend.calls == []
+
+    await send(first, JOG_X)
+    await backend.wait_for(lambda: backend.named("jog_continuous"), what="the jog")
+    await send(second, {"type": "take_control"})
+    assert "holding a jog" in (await next_message(second, "error"))["text"]
+
+    await send(first, {"type": "stop"})
+    await backend.wait_for(lambda: backend.named("stop"), what="the stop")
+    await send(second, {"type": "take_control"})
+    assert (await next_message(second, "role"))["role"] == "controller"
+    await until_role(first, "watcher")
+    await send(first, JOG_X)
+    assert "watching only" in (await next_message(first, "error"))["text"]
+    await first.close()
+    await second.close()
+
+
+async def test_control_is_free_after_the_controller_leaves(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    first = await open_ws(http, p)
+    await next_message(first, "role")
+    second = await open_ws(http, p)
+    await next_message(second, "role")
+    await first.close()
+    role = await next_message(second, "role")
+    assert role["role"] == "watcher"
+    assert role["controlled"] is False
+    await send(second, {"type": "take_control"})
+    assert (await next_message(second, "role"))["role"] == "controller"
+    await second.close()
+
+
+async def test_jogging_is_refused_in_words_when_the_machine_says_no(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    backend: RecordingBackend = p.backend
+    backend.set_view(can_jog=False, state="Alarm", reason="Alarm 1: hard limit; unlock with $X")
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    text = (await next_message(ws, "error"))["text"]
+    assert text == "jogging is disabled: Alarm 1: hard limit; unlock with $X"
+    await send(ws, {"type": "step", "axis": "X", "dist_mm": 1})
+    assert "jogging is disabled" in (await next_message(ws, "error"))["text"]
+    assert backend.named("jog_continuous") == []
+    assert backend.named("jog_step") == []
+    await ws.close()
+
+
+async def test_a_failing_backend_is_answered_and_the_machine_stopped(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    backend: RecordingBackend = p.backend
+    backend.fail_on.add("jog_continuous")
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    assert "jog refused" in (await next_message(ws, "error"))["text"]
+    assert backend.named("stop")
+    assert not p.hub.deadman.armed
+    backend.fail_on = {"view"}
+    assert "machine view unavailable" in (await next_message(ws, "error"))["text"]
+    backend.fail_on = set()
+    assert (await next_message(ws, "view"))["state"] == "Idle"
+    await ws.close()
+
+
+# -- dead-man -------------------------------------------------------------------------------------
+
+
+async def test_silence_during_a_held_jog_trips_the_deadman(
+    pendant: StartPendant, http: aiohttp.ClientSession, artifacts: Path
+) -> None:
+    p = await pendant(deadman_s=0.15)
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    await backend.wait_for(lambda: backend.named("stop"), timeout_s=3.0, what="the dead-man")
+    jog = backend.named("jog_continuous")[-1]
+    stop = backend.named("stop")[0]
+    delay_s = stop.t_s - jog.t_s
+    print(f"dead-man stop {delay_s * 1000:.1f} ms after the last heartbeat (window 150 ms)")
+    with (artifacts / "deadman-server.txt").open("w") as f:
+        f.write(f"{delay_s * 1000:.1f} ms after the last heartbeat, window 150 ms\n")
+    assert 0.15 <= delay_s < 1.0
+    assert "no heartbeat" in (await next_message(ws, "error"))["text"]
+    assert p.hub.deadman_trips == 1
+    await ws.close()
+
+
+async def test_heartbeats_keep_a_jog_alive_and_release_stops_once(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    # A wide window keeps this test about heartbeats, not about a busy test machine.
+    p = await pendant(deadman_s=0.5)
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    for _ in range(20):
+        await send(ws, JOG_X)
+        await asyncio.sleep(0.04)
+    await backend.wait_for(lambda: len(backend.named("jog_continuous")) == 20, what="20 jogs")
+    assert backend.named("stop") == []
+    await send(ws, {"type": "jog", "axes": {"X": 0, "Y": 0}, "speed": 0.5})
+    await backend.wait_for(lambda: backend.named("stop"), what="the stop")
+    await asyncio.sleep(0.7)
+    assert len(backend.named("stop")) == 1
+    assert p.hub.deadman_trips == 0
+    await ws.close()
+
+
+async def test_closing_the_controller_socket_stops_the_machine(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(deadman_s=5.0)
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    await backend.wait_for(lambda: backend.named("jog_continuous"), what="the jog")
+    await ws.close()
+    await backend.wait_for(lambda: backend.named("stop"), timeout_s=2.0, what="the stop")
+    assert p.hub.controller is None
+
+
+# -- view stream ----------------------------------------------------------------------------------
+
+
+async def test_view_streams_while_moving_and_only_on_change_when_idle(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    backend = RecordingBackend(animate=False)
+    backend.set_view(moving=True, state="Jog")
+    p = await pendant(backend)
+    ws = await open_ws(http, p)
+    await next_message(ws, "view")
+    loop = asyncio.get_running_loop()
+    start_s = loop.time()
+    count = 0
+    while loop.time() - start_s < 1.0:
+        await next_message(ws, "view")
+        count += 1
+    # 20 Hz nominal; a loaded test machine may lag, so only a loose lower bound.
+    assert count >= 12
+
+    backend.set_view(moving=False, state="Idle")
+    await next_message(ws, "view")
+    with contextlib.suppress(TimeoutError):
+        extra = await next_message(ws, "view", timeout_s=0.4)
+        pytest.fail(f"an unchanged idle view was sent again: {extra}")
+    backend.set_view(wpos=[1.0, 2.0, 3.0])
+    assert (await next_message(ws, "view"))["wpos"] == [1.0, 2.0, 3.0]
+    await ws.close()
+
+
+# -- run_pendant ----------------------------------------------------------------------------------
+
+
+async def test_run_pendant_prints_its_url_serves_and_stops_when_cancelled(
+    capsys: pytest.CaptureFixture[str], http: aiohttp.ClientSession
+) -> None:
+    backend = RecordingBackend()
+    ready: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+    task = asyncio.create_task(run_pendant(backend, port=0, on_ready=ready.set_result))
+    url = await asyncio.wait_for(ready, 5.0)
+    assert url.startswith("http://127.0.0.1:")
+    assert f"smoothjog pendant: {url}" in capsys.readouterr().out
+    async with http.get(url) as r:
+        assert r.status == 200
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+    with pytest.raises(aiohttp.ClientConnectionError):
+        async with http.get(url):
+            pass
+
+
+async def test_run_pendant_refuses_a_network_address_without_lan() -> None:
+    with pytest.raises(PendantError, match="--lan"):
+        await run_pendant(RecordingBackend(), host="0.0.0.0", port=0)
+
+
+def test_lan_banner_shows_the_token_url_and_a_qr_code() -> None:
+    text = format_banner(8765, host="127.0.0.1", token="TOK", lan_address="192.168.1.20")
+    assert "http://192.168.1.20:8765/?token=TOK" in text
+    assert "http://127.0.0.1:8765/?token=TOK" in text
+    assert "█" in text or "▀" in text or "▄" in text  # the terminal QR code
+    assert format_banner(8765, host="127.0.0.1", token=None, lan_address=None) == (
+        "smoothjog pendant: http://127.0.0.1:8765/\n"
+    )
