@@ -35,6 +35,8 @@ from smoothjog.core.responses import ErrorReply, Ok, Response
 from smoothjog.core.units import mm_min_to_mm_s
 
 JOG_CANCEL = b"\x85"
+#: Status polling of the reference senders (Grbl's docs: no more than 5 Hz).
+STATUS_INTERVAL_S = 0.2
 
 
 class _Host:
@@ -52,6 +54,7 @@ class _Host:
         self._pending: deque[str] = deque()
         self._pending_bytes = 0
         self.outbox: list[Output] = []
+        self._last_status_s = -1.0
 
     # JogHost -----------------------------------------------------------------------------
     def set_intent(self, intent: Intent, now_s: float) -> None:
@@ -71,6 +74,10 @@ class _Host:
 
     def poll(self, now_s: float) -> list[Output]:
         """Give the method a chance to act, then hand over what it queued."""
+        if now_s - self._last_status_s >= STATUS_INTERVAL_S:
+            # Every sender polls the position; 5 Hz is what Grbl's interface doc recommends.
+            self._last_status_s = now_s
+            self.realtime(b"?")
         self.tick(now_s)
         out, self.outbox = self.outbox, []
         return out

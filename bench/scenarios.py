@@ -125,6 +125,9 @@ def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> R
     vs.set_intent(_stick(1.0))
     t_rev = t0 + _hold_s(ph) + phase_s
     vs.run_until(t_rev)
+    # The stick flips through neutral in one instant: each method reacts to both events as it
+    # is written (the reference methods cancel at neutral); smoothjog acts on the newest intent.
+    vs.set_intent(_stick(1.0, 0.0))
     vs.set_intent(_stick(1.0, -DIRECTION))
     t_end = t_rev + 4 * ph.stop_s + 2.0
     vs.run_until(t_end + 0.1)

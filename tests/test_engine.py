@@ -106,7 +106,7 @@ def test_release_at_full_speed_stops_like_the_firmware_floor_with_no_restart() -
     engine = vs.engine
     assert engine is not None
     assert engine.stats.stops[-1].cancelled
-    assert engine.stats.stops[-1].tracked_error_mm <= STEP_MM
+    assert engine.stats.stops[-1].tracked_error_steps <= 1.0
     assert engine.stats.recancels == 0
 
 
@@ -159,7 +159,7 @@ def test_steps_are_exact_and_tracked() -> None:
     assert end[0] - start[0] == pytest.approx(-11.1875, abs=STEP_MM / 2)
     engine = vs.engine
     assert engine is not None
-    assert engine.stats.stops[-1].tracked_error_mm <= STEP_MM
+    assert engine.stats.stops[-1].tracked_error_steps <= 1.0
 
 
 def test_goto_moves_in_machine_coordinates() -> None:

@@ -70,6 +70,7 @@ class VirtualSession:
         self.host: JogHost | None = None
         #: Set by kill(): the host is gone (a crashed client); only the controller runs on.
         self.dead = False
+        self._poll_due = False
         self.tuning = tuning or JogTuning()
         self.keepouts = tuple(keepouts)
         self.now_s = start_s
@@ -143,7 +144,9 @@ class VirtualSession:
         if self.dead:
             return
         self._host().set_intent(intent, self.now_s)
-        self._poll()
+        # The host acts at its next poll, as in real time: intents given at the same instant
+        # reach it together and it acts on the newest (the engine's contract).
+        self._poll_due = True
 
     def kill(self) -> None:
         """The host dies now: it sends and reads nothing more; the controller runs on."""
@@ -169,6 +172,10 @@ class VirtualSession:
             nxt = self.rig.next_event_s()
             t = min(until_s, deadline, math.inf if nxt is None else nxt)
             t = max(t, self.now_s)
+            if self._poll_due:
+                self._poll_due = False
+                self._poll()
+                continue
             got = self._deliver(t)
             self.now_s = t
             if got or t >= deadline or t == until_s or (nxt is not None and t == nxt):

@@ -65,6 +65,7 @@ class Summary:
     distance_mm: float | None = None
     stops: int = 0
     worst_tracking_mm: float = 0.0
+    worst_tracking_steps: float = 0.0
     final_mpos: Vec | None = None
     final_state: str | None = None
     idle: bool = False
@@ -81,7 +82,8 @@ class Summary:
             out.append(f"  distance        {self.distance_mm:.3f} mm (simulator ground truth)")
         out += [
             f"  stops           {self.stops}",
-            f"  tracked - real  {1000 * self.worst_tracking_mm:.2f} µm (worst, at a stop)",
+            f"  tracked - real  {1000 * self.worst_tracking_mm:.2f} µm, "
+            f"{self.worst_tracking_steps:.2f} steps (worst axis, worst stop)",
             f"  final state     {self.final_state or 'unknown'} at MPos {pos}",
         ]
         if self.faults:
@@ -102,6 +104,7 @@ def _fill(summary: Summary, engine: Jogger, events: list[EngineEvent]) -> None:
     summary.stops = len(engine.stats.stops)
     if engine.stats.stops:
         summary.worst_tracking_mm = max(s.tracked_error_mm for s in engine.stats.stops)
+        summary.worst_tracking_steps = max(s.tracked_error_steps for s in engine.stats.stops)
     summary.final_mpos = engine.model.mpos_mm
     summary.final_state = engine.model.state
     summary.faults = [

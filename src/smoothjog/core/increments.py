@@ -72,26 +72,23 @@ def queue_target_mm(speed_mm_s: float, accel_mm_s2: float, ahead_s: float) -> fl
     return stop_distance_mm(speed_mm_s, accel_mm_s2) + speed_mm_s * ahead_s
 
 
-def block_length_mm(
-    speed_mm_s: float,
-    accel_mm_s2: float,
-    planner_blocks: int,
-    *,
-    dt_floor_s: float,
-    queue_mm: float,
-    blocks_for_queue: int,
-) -> float:
-    """Length of the next increment: long enough for the line rate and the planner, no longer.
+def committed_s(block_s: float, *, segment_s: float = 0.010, segments: int = 5) -> float:
+    """Longest time the firmware's prepared segments can cover when every block lasts block_s.
 
-    Three lower bounds: the line rate the link and parser sustain (v·dt_floor), the corrected
-    planner bound (v²/(2a(N−1))), and the queue fitting in `blocks_for_queue` blocks so the planner
-    never fills (a full planner holds back the `ok`, and a held `ok` defeats a clean cancel).
+    Grbl cuts each block into segments of at most segment_s and ends a segment at the end of its
+    block (facts §4.3, st_prep_buffer), and keeps `segments` of them prepared (facts §4.1). With
+    blocks of 10.5 ms the pattern is 10, 0.5, 10, 0.5, ... so five segments hold at most 31 ms,
+    not 50: short blocks shorten what a cancel cannot take back.
     """
-    return max(
-        speed_mm_s * dt_floor_s,
-        min_block_mm(speed_mm_s, accel_mm_s2, planner_blocks),
-        queue_mm / max(blocks_for_queue, 1),
-    )
+    if block_s <= 0.0:
+        return segments * segment_s
+    full = int(block_s // segment_s)
+    rest = block_s - full * segment_s
+    pattern = [segment_s] * full + ([rest] if rest > 1e-9 else [])
+    if not pattern:
+        return segments * segment_s
+    n = len(pattern)
+    return max(sum(pattern[(start + k) % n] for k in range(segments)) for start in range(n))
 
 
 def let_run_turn_s(

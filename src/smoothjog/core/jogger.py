@@ -135,10 +135,18 @@ class JogTuning:
     max_feed_mm_min: float | None = None
     #: Segments the firmware has committed ahead of the step generator (facts §4.1: ~50 ms).
     committed_s: float = 0.050
-    #: Shortest block duration, so the parser keeps up (the jogging doc's conservative 10 ms).
-    dt_floor_s: float = 0.010
-    #: Extra queue time for link jitter on top of the measured round trip.
-    link_margin_s: float = 0.004
+    #: Shortest block duration: the jogging doc's conservative 10 ms for the parser to keep up,
+    #: plus 0.5 ms so each block is one full 10 ms segment and a short one (increments.committed_s).
+    dt_floor_s: float = 0.0105
+    #: Extra queue time on top of the measured round trip: one tick of the engine (the queue is
+    #: only checked every tick) plus link jitter.
+    link_margin_s: float = 0.0005
+    #: How often the engine wants to be polled while jogging (the top-up check).
+    tick_s: float = 0.001
+    #: Wire time of one byte from the controller (115200 8N1: 86.8 µs); a status report's position
+    #: is as old as its bytes took to arrive (facts §6). Overstating it only makes the queue
+    #: longer, never too short.
+    byte_s: float = 10 / 115200
     #: Status polling while moving and while idle (Grbl's docs: 5-10 Hz is comfortable).
     poll_moving_s: float = 0.050
     poll_idle_s: float = 0.250
@@ -239,6 +247,7 @@ class StopRecord:
     cancelled: bool
     recancels: int
     tracked_error_mm: float
+    tracked_error_steps: float  # the worst axis, in its own steps
     mpos_mm: Vec
 
 
@@ -289,7 +298,9 @@ class Jogger:
         self.stats = EngineStats()
         self.events: list[EngineEvent] = []
         self.phase = Phase.IDLE
-        self._intent: Intent | None = None
+        self._intent: ContinuousIntent | None = None
+        self._acted_intent: ContinuousIntent | None = None
+        self._stop_requested = False
         self._ratios = dict(self.tuning.speed_ratios)
         self._pending: deque[_Pending] = deque()
         self._pending_bytes = 0
@@ -316,35 +327,38 @@ class Jogger:
 
     # ----------------------------------------------------------------- inputs
     def set_intent(self, intent: Intent, now_s: float) -> None:
-        """Take the newest intent; the engine always acts on the latest one."""
-        if isinstance(intent, StepIntent):
-            self._validate_step(intent)
-            if self.phase is Phase.JOGGING:
-                self._begin_stop(now_s)
-            self._steps.append(intent)
-            self._intent = None
-            return
-        if isinstance(intent, GotoIntent):
-            self._validate_goto(intent)
-            if self.phase is Phase.JOGGING:
-                self._begin_stop(now_s)
-            self._steps.append(intent)
+        """Take the newest intent; the next poll acts on the latest one only."""
+        if isinstance(intent, StepIntent | GotoIntent):
+            if isinstance(intent, StepIntent):
+                self._validate_step(intent)
+            else:
+                self._validate_goto(intent)
+            self._steps.append(intent)  # steps queue in order; a held stick is released
             self._intent = None
             return
         if isinstance(intent, StopIntent) or intent.is_neutral():
             self._intent = None
             self._steps.clear()
-            self._restart_after_stop = False
-            if self.phase in (Phase.JOGGING, Phase.STEPPING, Phase.SETTLING):
-                self._begin_stop(now_s)
+            self._stop_requested = True
             return
         self._validate_continuous(intent)
-        previous = self._commanded
         self._intent = intent
+
+    def _act_on_intent(self, now_s: float) -> None:
+        """Turn the newest intent into a phase change (called from poll)."""
+        intent = self._intent
+        if self._stop_requested:
+            self._stop_requested = False
+            if intent is None and self.phase in (Phase.STEPPING, Phase.SETTLING):
+                self._begin_stop(now_s)
         if self.phase is Phase.JOGGING:
-            self._consider_turn(previous, now_s)
+            if intent is None:
+                self._begin_stop(now_s)  # neutral, or a step waits for the stick to stop
+            elif intent is not self._acted_intent:
+                self._consider_turn(self._commanded, now_s)
         elif self.phase is Phase.STOPPING:
-            self._restart_after_stop = True
+            self._restart_after_stop = isinstance(intent, ContinuousIntent)
+        self._acted_intent = intent
 
     def busy(self) -> bool:
         """True while anything is queued, streaming or stopping, or an intent is held."""
@@ -394,6 +408,7 @@ class Jogger:
         """Everything to send now; call on every reply and at least every next_deadline_s()."""
         out: list[Output] = []
         self._update_estimate(now_s)
+        self._act_on_intent(now_s)
         if self.phase is Phase.IDLE:
             if self._steps and self._may_jog():
                 self.phase = Phase.STEPPING
@@ -416,7 +431,7 @@ class Jogger:
         """The latest time the driver should call poll again."""
         if self.phase is Phase.IDLE and self._intent is None and not self._steps:
             return now_s + self.tuning.poll_idle_s
-        return now_s + min(self.tuning.dt_floor_s / 2, self.tuning.poll_moving_s)
+        return now_s + self.tuning.tick_s
 
     # ----------------------------------------------------------------- continuous jogging
     def _velocity(self) -> inc.VectorMove | None:
@@ -446,8 +461,26 @@ class Jogger:
         self._est_s = now_s
         self._moving_since_ack = False
 
-    def _ahead_s(self) -> float:
-        return self.tuning.committed_s + self._rtt_s + self.tuning.link_margin_s
+    def _ahead_s(self, block_s: float) -> float:
+        """Queue time beyond the stopping distance: committed segments, round trip, one tick."""
+        committed = min(inc.committed_s(block_s), self.tuning.committed_s)
+        return committed + self._rtt_s + self.tuning.link_margin_s
+
+    def _block_s(self, move: inc.VectorMove) -> float:
+        """Duration of one increment at this speed: just over one 10 ms segment when possible.
+
+        A block of 10-20 ms makes the firmware's five prepared segments cover ~31 ms instead of
+        50 ms (see increments.committed_s), so less is committed when the stick is released. It
+        must still satisfy the corrected bound dt >= v/(2a(N-1)) and let the planner hold the
+        stopping distance within the blocks the engine allows itself.
+        """
+        usable = max(self.limits.planner_blocks - self.tuning.planner_reserve_blocks, 2)
+        return max(
+            self.tuning.dt_floor_s,
+            inc.min_block_s(move.speed_mm_s, move.accel_mm_s2, self.limits.planner_blocks),
+            inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2)
+            / (move.speed_mm_s * (usable - 1)),
+        )
 
     def _stream(self, now_s: float, out: list[Output]) -> None:
         move = self._velocity()
@@ -456,21 +489,19 @@ class Jogger:
         self._commanded = move
         n_blocks = self.limits.planner_blocks
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
+        block_s = self._block_s(move)
         for _ in range(n_blocks):
             queued_mm = self._queued_mm()
-            target_mm = inc.queue_target_mm(move.speed_mm_s, move.accel_mm_s2, self._ahead_s())
+            # While the machine is still faster than the new speed (a slowdown), size the queue
+            # for the speed it has: the slower blocks must be queued before the faster ones run
+            # out, or the planner brakes below the new speed.
+            speed_mm_s = max(move.speed_mm_s, self._v_est_mm_s)
+            target_mm = inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, self._ahead_s(block_s))
             if queued_mm >= target_mm:
                 return
             if self._blocks_in_planner() >= usable_blocks:
                 return
-            length_mm = inc.block_length_mm(
-                move.speed_mm_s,
-                move.accel_mm_s2,
-                n_blocks,
-                dt_floor_s=self.tuning.dt_floor_s,
-                queue_mm=target_mm,
-                blocks_for_queue=usable_blocks - 1,
-            )
+            length_mm = move.speed_mm_s * block_s
             if not self._path:
                 # The firmware commits ~50 ms of segments from the first block alone, planned
                 # to stop at its end; make it long enough that this ramp never turns to braking
@@ -749,9 +780,16 @@ class Jogger:
     def _finish_stop(self, report: StatusReport, now_s: float) -> None:
         mpos = self.model.mpos_mm
         if mpos is not None:
-            err = self._tracking_error(mpos, cancelled=self._stop_cancelled)
+            err_mm, err_steps = self._tracking_error(mpos, cancelled=self._stop_cancelled)
             self.stats.stops.append(
-                StopRecord(now_s, self._stop_cancelled, self._stop_recancels, err, tuple(mpos))
+                StopRecord(
+                    now_s,
+                    self._stop_cancelled,
+                    self._stop_recancels,
+                    err_mm,
+                    err_steps,
+                    tuple(mpos),
+                )
             )
             self.events.append(EngineEvent(now_s, "stop", f"stopped at {_fmt(mpos)}"))
         self._path.clear()
@@ -764,14 +802,26 @@ class Jogger:
             self._intent = None
         self._restart_after_stop = False
 
-    def _tracking_error(self, mpos: Vec, *, cancelled: bool) -> float:
-        """Tracked minus real: the miss of the planned end, or from the queued path if cancelled."""
+    def _tracking_error(self, mpos: Vec, *, cancelled: bool) -> tuple[float, float]:
+        """Tracked minus real, in mm and in steps of the worst axis.
+
+        After a queue that ran out, it is the miss of the planned end; after a cancel, the miss
+        of the nearest point of the queued path (the stop must lie on it, facts §3.1). Steps are
+        counted per axis because the firmware rounds each axis to its own steps.
+        """
         if not self._path:
-            return 0.0
+            return 0.0, 0.0
+        spm = self.limits.steps_per_mm
         if not cancelled:
-            end = self._path[-1].end_mm
-            return math.dist(end, mpos)
-        return min(_dist_to_segment(mpos, s.start_mm, s.end_mm) for s in self._path)
+            ref = self._path[-1].end_mm
+            steps = max(abs(r - m) * k for r, m, k in zip(ref, mpos, spm, strict=True))
+            return math.dist(ref, mpos), steps
+        best_steps, best_ref = math.inf, mpos
+        for seg in self._path:
+            steps, ref = _nearest_in_steps(mpos, seg.start_mm, seg.end_mm, spm)
+            if steps < best_steps:
+                best_steps, best_ref = steps, ref
+        return math.dist(best_ref, mpos), best_steps
 
     def _abandon_motion(self) -> None:
         """Forget the queued path (after an alarm or reset): nothing more is sent."""
@@ -828,7 +878,7 @@ class Jogger:
                 dt = now_s - self._last_report[0]
                 self._actual_speed_mm_s = math.dist(mpos, self._last_report[1]) / dt
             self._last_report = (now_s, tuple(mpos))
-            self._correct_estimate(mpos, now_s)
+            self._correct_estimate(mpos, (len(report.raw) + 2) * self.tuning.byte_s)
         if state == "Run" and self.phase in (Phase.JOGGING, Phase.STEPPING, Phase.STOPPING):
             # facts §9: a jog block can start in Run (a firmware race); it finishes by itself
             # within the queued path. Stop streaming and wait for Idle.
@@ -954,7 +1004,7 @@ class Jogger:
                 return seg
         return None
 
-    def _correct_estimate(self, mpos: Vec, now_s: float) -> None:
+    def _correct_estimate(self, mpos: Vec, age_s: float) -> None:
         """Pull the estimate onto the reported position (projected on the path)."""
         if not self._path or not self._moving_since_ack:
             return
@@ -965,7 +1015,9 @@ class Jogger:
                 best = (d, seg.x0_mm + along)
         if best is None or best[0] > 1.0:
             return
-        self._x_est_mm = best[1]
+        # The report was built before its bytes crossed the wire: move it forward by that age.
+        ahead = self._v_est_mm_s * age_s
+        self._x_est_mm = min(best[1] + ahead, self._path_length_mm())
 
     def _fault_now(self, now_s: float, text: str, hint: str) -> None:
         self._fault = (text, hint)
@@ -1033,8 +1085,27 @@ def _project(p: Vec, a: Vec, b: Vec) -> tuple[float, float]:
     return math.dist(p, closest), t * length
 
 
-def _dist_to_segment(p: Vec, a: Vec, b: Vec) -> float:
-    return _project(p, a, b)[0]
+def _nearest_in_steps(p: Vec, a: Vec, b: Vec, steps_per_mm: Vec) -> tuple[float, Vec]:
+    """The point of segment ab nearest to p when distance is the worst axis counted in steps.
+
+    The firmware rounds each axis to its own step grid, so "within one step" is per axis. The
+    distance along the segment is convex in t; a ternary search finds its minimum.
+    """
+
+    def at(t: float) -> tuple[float, Vec]:
+        q = tuple(ai + (bi - ai) * t for ai, bi in zip(a, b, strict=True))
+        err = max(abs(qi - pi) * k for qi, pi, k in zip(q, p, steps_per_mm, strict=True))
+        return err, q
+
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        m1 = lo + (hi - lo) / 3
+        m2 = hi - (hi - lo) / 3
+        if at(m1)[0] <= at(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    return at((lo + hi) / 2)
 
 
 def _fmt(v: Sequence[float]) -> str:
