@@ -169,10 +169,11 @@ class PendantPost150(_Host):
             for a, r in ratios.items()
         }
         feed = max(ratios.values()) * speed_mm_min
-        self.send(build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes))
+        line = build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes)
+        self.send(line)
         self.sent_count += 1
         step = self.first_interval_s if self.sent_count == 1 else self.interval_s
-        self.next_send_s += step
+        self.next_send_s = now_s + step
 
 
 class WikiJog(_Host):
@@ -248,15 +249,18 @@ class LongJog(_Host):
         self.want = None
         speeds = self.axis_speeds_mm_min(intent)
         feed = math.sqrt(sum(s * s for s in speeds.values()))
-        env = self.limits.envelope
         pos = self.model.mpos_mm
-        # Distance to the travel edge along the direction (a 1 m jog without soft limits).
-        reach = 1000.0
-        if env is not None:
-            for a, s in speeds.items():
-                i = self.limits.axes.index(a)
-                room = (env.max_mm[i] - pos[i]) if s > 0 else (pos[i] - env.min_mm[i])
-                reach = min(reach, max(room - 0.01, 0.0) * feed / abs(s))
+        # Distance to the edge of travel along the direction: the soft-limit box, or without
+        # soft limits the homed machine space -$13x..0 (facts §2), as senders compute it.
+        travel = self.model.settings.for_axes(len(self.limits.axes)).max_travel_mm
+        env = self.limits.envelope
+        lo = env.min_mm if env is not None else tuple(-t for t in travel)
+        hi = env.max_mm if env is not None else (0.0,) * len(travel)
+        reach = math.inf
+        for a, s in speeds.items():
+            i = self.limits.axes.index(a)
+            room = (hi[i] - pos[i]) if s > 0 else (pos[i] - lo[i])
+            reach = min(reach, max(room - 0.01, 0.0) * feed / abs(s))
         moves = {a: s / feed * reach for a, s in speeds.items()}
         if reach > 0.01 and self.send(
             build_jog_line(moves=moves, feed_mm_min=round(feed, 3), axes=self.limits.axes)

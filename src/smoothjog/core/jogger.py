@@ -40,6 +40,8 @@ from smoothjog.core.units import Vec, mm_min_to_mm_s, mm_s_to_mm_min, norm
 JOG_CANCEL = b"\x85"
 STATUS_QUERY = b"?"
 SYNC_LINE = "G4P0"
+#: Distance of finished path kept behind the estimate (a stop is judged against the path ahead).
+PATH_KEEP_MM = 20.0
 
 #: Controller states in which a jog is accepted (facts §1.4).
 JOG_STATES = frozenset({"Idle", "Jog"})
@@ -408,6 +410,7 @@ class Jogger:
         """Everything to send now; call on every reply and at least every next_deadline_s()."""
         out: list[Output] = []
         self._update_estimate(now_s)
+        self._prune_path()
         self._act_on_intent(now_s)
         if self.phase is Phase.IDLE:
             if self._steps and self._may_jog():
@@ -893,6 +896,15 @@ class Jogger:
             self.phase = Phase.SETTLING
             self._status_wanted_after_s = now_s
             return
+        if (
+            state == "Idle"
+            and self.phase is Phase.JOGGING
+            and not any(p.kind == "jog" for p in self._pending)
+            and self._path
+        ):
+            # Every jog was answered and the machine rests: the whole queue has run.
+            self._x_est_mm = self._path_length_mm()
+            self._v_est_mm_s = 0.0
         fresh = self._status_wanted_after_s is not None
         if state not in JOG_STATES and state != "Run":
             self._status_wanted_after_s = None
@@ -1005,19 +1017,38 @@ class Jogger:
         return None
 
     def _correct_estimate(self, mpos: Vec, age_s: float) -> None:
-        """Pull the estimate onto the reported position (projected on the path)."""
+        """Pull the estimate onto the reported position (projected on the path).
+
+        A path that doubles back passes the same point twice, so among the segments the report
+        lies on, the one nearest the current estimate wins.
+        """
         if not self._path or not self._moving_since_ack:
             return
-        best: tuple[float, float] | None = None
+        tolerance_mm = 2.0 / min(self.limits.steps_per_mm) + 1e-6
+        best: float | None = None
         for seg in self._path:
             d, along = _project(mpos, seg.start_mm, seg.end_mm)
-            if best is None or d < best[0] - 1e-9:
-                best = (d, seg.x0_mm + along)
-        if best is None or best[0] > 1.0:
+            if d > tolerance_mm:
+                continue
+            x = seg.x0_mm + along
+            if best is None or abs(x - self._x_est_mm) < abs(best - self._x_est_mm):
+                best = x
+        if best is None:
             return
         # The report was built before its bytes crossed the wire: move it forward by that age.
         ahead = self._v_est_mm_s * age_s
-        self._x_est_mm = min(best[1] + ahead, self._path_length_mm())
+        self._x_est_mm = min(best + ahead, self._path_length_mm())
+
+    def _prune_path(self) -> None:
+        """Forget jogs the machine finished long ago (the path would grow without end)."""
+        keep_from = self._x_est_mm - PATH_KEEP_MM
+        drop = 0
+        while drop < len(self._path) - 1 and (
+            self._path[drop].x0_mm + self._path[drop].length_mm < keep_from
+        ):
+            drop += 1
+        if drop:
+            del self._path[:drop]
 
     def _fault_now(self, now_s: float, text: str, hint: str) -> None:
         self._fault = (text, hint)

@@ -77,8 +77,19 @@ class SimRig:
         self,
         firmware: GrblFirmware | None = None,
         link: LinkModel | None = None,
+        *,
+        clock_ratio: float = 1.0,
     ) -> None:
-        """Wire a firmware (default: Grbl 1.1h with default settings) to a link model."""
+        """Wire a firmware (default: Grbl 1.1h with default settings) to a link model.
+
+        clock_ratio is how fast the controller's clock runs against the host's: 1.0 for the
+        same clock; 1.003 for a controller 0.3 % fast, as a simulator whose clock is only
+        roughly real time can be (facts §0 on grbl-sim). Times the rig takes and gives are
+        the host's; the firmware and its trace keep their own.
+        """
+        if not 0.5 < clock_ratio < 2.0:
+            raise SimError(f"clock ratio {clock_ratio} is not a plausible clock error")
+        self.clock_ratio = clock_ratio
         self.firmware = firmware if firmware is not None else GrblFirmware()
         self.link = link if link is not None else LinkModel()
         rng = random.Random(self.link.seed)
@@ -86,7 +97,7 @@ class SimRig:
         self._down = _Direction(self.link, rng)
         self._to_fw: deque[tuple[float, int]] = deque()
         self._to_host: deque[tuple[float, bytes]] = deque()
-        self._now_s = self.firmware.now_s
+        self._now_s = self.firmware.now_s / clock_ratio
         self._collect()
 
     @property
@@ -101,8 +112,14 @@ class SimRig:
 
     @property
     def trace(self) -> list[TraceSegment]:
-        """Ground-truth segments: true position over time."""
-        return self.firmware.trace
+        """Ground-truth segments: true position over (host) time."""
+        r = self.clock_ratio
+        if r == 1.0:
+            return self.firmware.trace
+        return [
+            TraceSegment(seg.t0_s / r, seg.t1_s / r, seg.start_mm, seg.end_mm)
+            for seg in self.firmware.trace
+        ]
 
     def host_send(self, data: bytes, now_s: float) -> float:
         """The host writes data at now_s; returns when its last byte reaches the controller."""
@@ -123,7 +140,7 @@ class SimRig:
             times.append(self._to_fw[0][0])
         fw_t = self.firmware.next_event_s()
         if fw_t is not None:
-            times.append(fw_t)
+            times.append(fw_t / self.clock_ratio)
         if self._to_host:
             times.append(self._to_host[0][0])
         return min(times) if times else None
@@ -131,18 +148,20 @@ class SimRig:
     def run_until(self, t_s: float) -> list[tuple[float, bytes]]:
         """Run to t_s; the complete lines that reached the host by then, EOL stripped."""
         fw = self.firmware
+        r = self.clock_ratio
         while True:
             byte_t = self._to_fw[0][0] if self._to_fw else None
-            fw_t = fw.next_event_s()
+            fw_next = fw.next_event_s()
+            fw_t = None if fw_next is None else fw_next / r  # in host time
             if byte_t is not None and byte_t <= t_s and (fw_t is None or byte_t <= fw_t):
                 arrival, chunk = self._take_line_bytes(min(t_s, fw_t if fw_t is not None else t_s))
-                fw.receive(chunk, max(arrival, fw.now_s))
-            elif fw_t is not None and fw_t <= t_s:
-                fw.advance(max(fw_t, fw.now_s))
+                fw.receive(chunk, max(arrival * r, fw.now_s))
+            elif fw_next is not None and fw_t is not None and fw_t <= t_s:
+                fw.advance(max(fw_next, fw.now_s))
             else:
                 break
             self._collect()
-        fw.advance(max(t_s, fw.now_s))
+        fw.advance(max(t_s * r, fw.now_s))
         self._collect()
         self._now_s = max(self._now_s, t_s)
         delivered = []
@@ -182,5 +201,5 @@ class SimRig:
         """Put the firmware's new output on the wire back to the host."""
         for sent_s, data in self.firmware.take_output():
             # The firmware sends whole lines; the host has one once its last byte is in.
-            times = self._down.send(len(data), sent_s)
+            times = self._down.send(len(data), sent_s / self.clock_ratio)
             self._to_host.append((times[-1], data.rstrip(b"\r\n")))

@@ -1,0 +1,118 @@
+"""`smoothjog pendant` (the default command): a controller, the jog engine and the web pendant.
+
+Without --port or --connect it drives the built-in simulated Grbl machine in real time, so the
+pendant can be tried with no machine at all. Ctrl-C stops any jog with the full cancel handshake
+and shuts down cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from typing import Any
+
+from smoothjog.cli.common import (
+    add_connection_args,
+    config_from_args,
+    connection_from_args,
+    link_for,
+)
+from smoothjog.config import Config
+from smoothjog.core.jogger import EngineEvent, JogTuning
+from smoothjog.handshake import format_summary
+from smoothjog.links.base import Link
+from smoothjog.links.sim import SimLink
+from smoothjog.session import JogSession
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import available_machine_profiles, get_firmware_profile
+from smoothjog.web.server import run_pendant
+from smoothjog.web.session_backend import SessionBackend
+
+
+def register(subparsers: Any) -> None:
+    """Add `pendant` to the command line."""
+    parser = subparsers.add_parser(
+        "pendant",
+        help="the web pendant on the built-in simulator or a real controller (default command)",
+        description=__doc__,
+    )
+    add_connection_args(parser)
+    sim = parser.add_argument_group("built-in simulator (when no --port/--connect)")
+    sim.add_argument("--firmware", choices=("grbl", "grblhal", "fluidnc"))
+    sim.add_argument(
+        "--machine",
+        metavar="PROFILE",
+        help=f"one of {', '.join(available_machine_profiles())}, or a .toml path",
+    )
+    web = parser.add_argument_group("pendant")
+    web.add_argument("--host", help="address to serve on (default 127.0.0.1)")
+    web.add_argument("--http-port", type=int, metavar="N", help="HTTP port (default 8080)")
+    web.add_argument(
+        "--lan",
+        action="store_true",
+        help="serve on the local network too, guarded by a pairing token shown as a QR code",
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run until Ctrl-C or SIGTERM."""
+    config = config_from_args(args)
+    connection = connection_from_args(args, config)
+    link = link_for(connection)
+    if link is None:
+        firmware = args.firmware or config.sim.firmware
+        machine = args.machine or config.sim.machine
+        link = SimLink(GrblFirmware(get_firmware_profile(firmware), machine))
+        print(
+            f"smoothjog: no controller given: using the built-in simulator ({firmware}, {machine})"
+        )
+    return asyncio.run(_serve(link, config, args, connection.timeout_s))
+
+
+def _print_event(event: EngineEvent) -> None:
+    if event.kind == "fault":
+        hint = f" ({event.hint})" if event.hint else ""
+        print(f"smoothjog: {event.text}{hint}", file=sys.stderr, flush=True)
+
+
+async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s: float) -> int:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    async with link:
+        session = JogSession(
+            link,
+            tuning=JogTuning(
+                speed_ratios=dict(config.jog.speed_ratios),
+                link_margin_s=config.jog.link_margin_s,
+            ),
+            keepouts=config.keepouts,
+            handshake_timeout_s=timeout_s,
+            on_event=_print_event,
+        )
+        model = await session.start()
+        print(format_summary(model), flush=True)
+        backend = SessionBackend(session, speed_ratios=config.jog.speed_ratios)
+        host = args.host or config.pendant.host
+        port = args.http_port if args.http_port is not None else config.pendant.port
+        lan = bool(args.lan or config.pendant.lan)
+        server = asyncio.create_task(run_pendant(backend, host=host, port=port, lan=lan))
+        waiter = asyncio.create_task(stop.wait())
+        try:
+            done, _ = await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
+            if server in done:
+                server.result()  # a failure to listen: raises the PendantError sentence
+        finally:
+            for task in (server, waiter):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+            await session.close()
+    print("smoothjog: stopped", flush=True)
+    return 0

@@ -1,0 +1,114 @@
+"""The pendant's backend for real: the web page's intents go to a JogSession's engine.
+
+Every method returns at once (the engine only records the intent; the session's ticker acts on
+it). Invalid requests raise JogBuildError, which the server reports to the page in words.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from smoothjog.core.codes import describe_alarm
+from smoothjog.core.jogger import ContinuousIntent, StepIntent, StopIntent
+from smoothjog.session import JogSession
+
+#: Step jogs run at this fraction of the top jog speed (fine positioning wants control, not haste).
+STEP_SPEED = 0.5
+
+
+def _finite(values: object) -> list[float | None] | None:
+    """JSON has no NaN: unknown numbers become null."""
+    if values is None:
+        return None
+    out: list[float | None] = []
+    for v in values:  # type: ignore[attr-defined]
+        out.append(float(v) if isinstance(v, int | float) and math.isfinite(v) else None)
+    return out
+
+
+class SessionBackend:
+    """PendantBackend over a started JogSession."""
+
+    def __init__(self, session: JogSession, *, speed_ratios: Mapping[str, float] | None = None):
+        """Wrap a session whose start() has completed."""
+        self.session = session
+        engine = session.engine
+        if engine is None:
+            raise RuntimeError("SessionBackend needs a started JogSession")
+        self._ratios = dict.fromkeys(engine.limits.axes, 1.0)
+        if speed_ratios:
+            self.set_speed_ratios(speed_ratios)
+
+    # ------------------------------------------------------------------ intents
+    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
+        """Hold a stick deflection (the page repeats it as the heartbeat)."""
+        self.session.set_intent(ContinuousIntent(dict(axes), speed))
+
+    def jog_step(self, axis: str, dist_mm: float) -> None:
+        """Queue an exact step."""
+        self.session.set_intent(StepIntent(axis, dist_mm, STEP_SPEED))
+
+    def stop(self) -> None:
+        """Neutral: the engine's full cancel handshake."""
+        self.session.set_intent(StopIntent())
+
+    def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
+        """Per-axis top speed ratios in (0, 1]."""
+        self.session.set_speed_ratios(ratios)
+        self._ratios.update(ratios)
+
+    # ------------------------------------------------------------------ the snapshot
+    def view(self) -> Mapping[str, object]:
+        """Everything the page shows, in the documented keys."""
+        session = self.session
+        engine = session.engine
+        assert engine is not None
+        v = session.view()
+        model = session.model
+        limits = engine.limits
+        env = limits.envelope
+        fault: dict[str, str] | None = None
+        if v.fault is not None:
+            fault = {"text": v.fault[0], "hint": v.fault[1]}
+        elif session.link_error is not None:
+            fault = {"text": str(session.link_error), "hint": "check the cable and restart"}
+        elif model.state == "Alarm" and model.last_alarm is not None:
+            fault = {"text": describe_alarm(model.last_alarm), "hint": ""}
+        reason = v.reason
+        if session.link_error is not None:
+            reason = "the connection to the controller is lost"
+        return {
+            "t_s": v.t_s,
+            "firmware": f"{model.firmware} {model.version or ''}".strip(),
+            "axes": list(limits.axes),
+            "state": v.state or "Unknown",
+            "substate": v.substate,
+            "can_jog": v.can_jog and session.link_error is None,
+            "reason": reason,
+            "units": "inch" if model.settings.report_inches else "mm",
+            "mpos": _finite(v.mpos_mm),
+            "wpos": _finite(v.wpos_mm),
+            "feed_mm_min": v.feed_mm_min,
+            "commanded_speed_mm_s": v.commanded_speed_mm_s,
+            "actual_speed_mm_s": v.actual_speed_mm_s,
+            "stop_point_mpos": _finite(v.stop_point_mm),
+            "queue": {
+                "queued_mm": round(v.queued_mm, 4),
+                "blocks": v.queued_blocks,
+                "planner_blocks": limits.planner_blocks,
+            },
+            "fault": fault,
+            "envelope": (
+                {"min_mm": list(env.min_mm), "max_mm": list(env.max_mm)}
+                if env is not None
+                else None
+            ),
+            "keepouts": [
+                {"name": z.name, "min_mm": list(z.min_mm), "max_mm": list(z.max_mm)}
+                for z in limits.keepouts
+            ],
+            "max_rate_mm_min": list(limits.max_rate_mm_min),
+            "speed_ratios": dict(self._ratios),
+            "moving": session.busy() or (v.state not in (None, "Idle", "Alarm", "Sleep")),
+        }
