@@ -14,6 +14,7 @@ from pathlib import Path
 
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, smoothjog_host
+from smoothjog.core.jogger import Jogger
 from smoothjog.core.machine import MachineModel
 from smoothjog.vsession import JogHost
 
@@ -54,21 +55,16 @@ REAL_FIRMWARE: dict[str, dict[str, tuple[float, ...]]] = {
 SMOOTHJOG = "smoothjog"
 
 
-def _cycle_s(name: str, factory: Factory, machine: str) -> float:
+def _cycle_s(factory: Factory, machine: str) -> float:
     """The host's send cycle on this machine, to spread the release over its phases."""
     vs, _ = sc._session(factory, machine, "grbl")
-    host = vs.host
     vs.set_intent(sc._stick(1.0))
     vs.run_until(vs.now_s + 0.3)
-    cycle = getattr(host, "cycle_s", None)
-    if cycle is None:  # smoothjog: the duration of one increment at full speed
-        ph = sc.physics(machine)
-        stats = getattr(host, "stats", None)
-        jogs = stats.jogs_sent if stats is not None else 1
-        cycle = 0.3 / max(jogs, 1) if jogs else 0.01
-        cycle = max(cycle, 0.005)
-        _ = ph
-    return float(cycle)
+    host = vs.host
+    if isinstance(host, Jogger):
+        # One increment at full speed lasts the engine's block time (just over one segment).
+        return host.tuning.dt_floor_s
+    return float(getattr(host, "cycle_s", 0.010))
 
 
 def run_all(
@@ -82,7 +78,7 @@ def run_all(
         results[machine] = {}
         plots[machine] = {}
         for name, factory in methods.items():
-            cycle = _cycle_s(name, factory, machine)
+            cycle = _cycle_s(factory, machine)
             offsets = [cycle * k / phases for k in range(phases)]
             runs: dict[str, list[sc.Run]] = {}
             for off in offsets:

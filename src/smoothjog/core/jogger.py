@@ -40,6 +40,8 @@ from smoothjog.core.units import Vec, mm_min_to_mm_s, mm_s_to_mm_min, norm
 JOG_CANCEL = b"\x85"
 STATUS_QUERY = b"?"
 SYNC_LINE = "G4P0"
+#: Jog-line latencies the round-trip estimate looks at.
+RTT_WINDOW = 32
 #: Distance of finished path kept behind the estimate (a stop is judged against the path ahead).
 PATH_KEEP_MM = 20.0
 
@@ -140,9 +142,10 @@ class JogTuning:
     #: Shortest block duration: the jogging doc's conservative 10 ms for the parser to keep up,
     #: plus 0.5 ms so each block is one full 10 ms segment and a short one (increments.committed_s).
     dt_floor_s: float = 0.0105
-    #: Extra queue time on top of the measured round trip: one tick of the engine (the queue is
-    #: only checked every tick) plus link jitter.
-    link_margin_s: float = 0.0005
+    #: Extra queue time on top of the measured round trip, for jitter of the host's scheduling
+    #: and of the link. Nothing jitters in virtual time, so the engine's default is 0; the
+    #: real-time commands take it from the config ([jog] link_margin_s, 5 ms by default).
+    link_margin_s: float = 0.0
     #: How often the engine wants to be polled while jogging (the top-up check).
     tick_s: float = 0.001
     #: Wire time of one byte from the controller (115200 8N1: 86.8 µs); a status report's position
@@ -321,7 +324,8 @@ class Jogger:
         self._status_wanted_after_s: float | None = None
         self._last_poll_s = -math.inf
         self._last_status_sent_s = -math.inf
-        self._rtt_s = 0.003  # measured ok latency of jog lines (EWMA), seeded with a guess
+        self._rtt_s = 0.003  # time for a jog line to be planned: a low percentile of its ok latency
+        self._rtts: deque[float] = deque(maxlen=RTT_WINDOW)
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
@@ -855,8 +859,11 @@ class Jogger:
             return
         if isinstance(resp, Ok):
             pending.seg.acked = True
-            rtt = now_s - pending.sent_s
-            self._rtt_s = 0.8 * self._rtt_s + 0.2 * rtt
+            # An ok can wait behind a status report on the way back; the line itself was planned
+            # on time. The lower quartile of recent latencies tracks the outbound time and still
+            # follows a link that gets slower.
+            self._rtts.append(now_s - pending.sent_s)
+            self._rtt_s = sorted(self._rtts)[len(self._rtts) // 4]
             if not self._moving_since_ack:
                 self._moving_since_ack = True
                 self._est_s = now_s
