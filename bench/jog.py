@@ -128,7 +128,7 @@ def table(results: dict[str, dict[str, dict[str, float]]], ph: sc.Physics) -> li
         if key == "S6":
             dv_a = 0.7 * ph.stop_s
             return f"{_fmt(r['time_s'])} s ({_fmt(r['time_s'] / dv_a)}x Δv/a)"
-        return f"{1000 * r['lag_s']:.0f} ms"
+        return "never follows" if math.isinf(r["lag_s"]) else f"{1000 * r['lag_s']:.0f} ms"
 
     labels = {
         "S1": "S1 release at full speed: distance / time to standstill",

@@ -128,9 +128,14 @@ def lag_s(
     max_lag_s: float = 0.5,
     step_s: float = 0.001,
 ) -> float:
-    """The shift of actual behind commanded (both sampled every step_s) that matches them best."""
+    """The shift of actual behind commanded (both sampled every step_s) that matches them best.
+
+    Infinite when the machine barely moved at all.
+    """
     cmd = [c for _, c in commanded]
     act = [a for _, a in actual]
+    if max((abs(a) for a in act), default=0.0) < 0.05 * max((abs(c) for c in cmd), default=1.0):
+        return math.inf  # the machine hardly moved: there is no lag to speak of, it never followed
     best_lag, best_score = 0.0, -math.inf
     for k in range(int(max_lag_s / step_s) + 1):
         n = len(cmd) - k
