@@ -244,10 +244,13 @@ def plot(plots: dict[str, dict[str, sc.Run]], machine: str, out: Path) -> list[P
                     lw=0.8,
                     label="commanded",
                 )
+            ax.axvline(0.0, color="grey", lw=0.6, ls=":")
             ax.set_ylabel("vx mm/s", fontsize=7)
             ax.set_title(name, fontsize=8, loc="left")
             ax.grid(alpha=0.3)
-        axes[-1].set_xlabel("time (s) from the event (S2/S7: from the press)")
+        axes[-1].set_xlabel(
+            "time (s) from the event: release, reversal, death, speed change (S2, S7: the press)"
+        )
         fig.suptitle(f"{key} on {machine}", fontsize=10)
         fig.tight_layout()
         path = out / f"{machine}-{key}.png"

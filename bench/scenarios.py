@@ -83,8 +83,13 @@ def _stick(speed: float, x: float = DIRECTION) -> ContinuousIntent:
     return ContinuousIntent({"X": x}, speed)
 
 
-def _series(vs: VirtualSession, t0: float, t1: float) -> list[tuple[float, float]]:
-    return [(t - t0, v[0]) for t, v in measure.sample_velocity(vs.rig.trace, t0, t1, dt_s=0.002)]
+def _series(
+    vs: VirtualSession, t0: float, t1: float, origin: float | None = None
+) -> list[tuple[float, float]]:
+    """X velocity over [t0, t1], times relative to origin (the scenario's event; default t0)."""
+    zero = t0 if origin is None else origin
+    samples = measure.sample_velocity(vs.rig.trace, t0, t1, dt_s=0.002)
+    return [(t - zero, v[0]) for t, v in samples]
 
 
 def _hold_s(ph: Physics) -> float:
@@ -109,7 +114,7 @@ def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed
             "time_s": max(end - t_rel, 0.0),
             "restarts": float(measure.restarts_after(trace, t_rel)),
         },
-        _series(vs, t_rel - 0.5, t_rel + 1.5),
+        _series(vs, t_rel - 0.5, t_rel + 1.5, t_rel),
     )
 
 
@@ -146,7 +151,7 @@ def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> R
     vs.run_until_idle(30.0)
     return Run(
         {"time_s": took if took is not None else math.inf},
-        _series(vs, t_rev - 0.5, t_rev + 2 * ph.stop_s + 1.0),
+        _series(vs, t_rev - 0.5, t_rev + 2 * ph.stop_s + 1.0, t_rev),
     )
 
 
@@ -165,7 +170,7 @@ def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -
             "dist_mm": measure.distance_after(trace, t_kill),
             "time_s": measure.last_motion_end(trace) - t_kill,
         },
-        _series(vs, t_kill - 0.5, t_kill + 2.0),
+        _series(vs, t_kill - 0.5, t_kill + 2.0, t_kill),
     )
 
 
@@ -184,7 +189,7 @@ def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) 
     vs.run_until_idle(30.0)
     return Run(
         {"time_s": took if took is not None else math.inf},
-        _series(vs, t_change - 0.5, t_change + 2 * ph.stop_s + 1.0),
+        _series(vs, t_change - 0.5, t_change + 2 * ph.stop_s + 1.0, t_change),
     )
 
 
