@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     worst = 0
     print(
         "| firmware | sequences | stops | ghost jogs | error:15 | envelope | keep-out | $G changed"
-        " | worst tracked-real (mm) | one step (mm) | wall s |"
+        " | worst tracked-real (steps) | wall s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.firmware.split(","):
