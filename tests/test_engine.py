@@ -286,3 +286,22 @@ def test_tuning_defaults_follow_the_firmware_facts() -> None:
     tuning = JogTuning()
     assert tuning.committed_s == pytest.approx(0.05)  # 5 segments of 10 ms (facts §4.1)
     assert tuning.planner_reserve_blocks >= 1
+
+
+def test_inch_reports_are_understood_and_jogs_stay_in_mm() -> None:
+    vs = session()
+    vs.query_line("$13=1")  # reports in inches from now on
+    vs.query_line("$$")
+    vs.run_until(vs.now_s + 0.3)
+    engine = vs.engine
+    assert engine is not None
+    assert engine.model.settings.report_inches
+    lines = sent_lines(vs)
+    start = vs.rig.firmware.mpos_mm()
+    vs.set_intent(StepIntent("X", -25.4, 0.5))
+    assert vs.run_until_idle(5.0)
+    assert vs.rig.firmware.mpos_mm()[0] == pytest.approx(start[0] - 25.4, abs=STEP_MM)
+    mpos = engine.model.mpos_mm
+    assert mpos is not None
+    assert mpos[0] == pytest.approx(start[0] - 25.4, abs=0.003)  # the model holds mm
+    assert all("G21" in line for line in lines if line.startswith("$J="))
