@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -68,38 +69,31 @@ def test_imports_point_one_way(path: Path) -> None:
     assert not bad, f"{path.relative_to(SRC)} ({layer}) imports {sorted(bad)}"
 
 
+def _top_modules(node: ast.AST) -> set[str]:
+    """Top-level module names an import node brings in (empty for any other node)."""
+    if isinstance(node, ast.Import):
+        return {alias.name.split(".")[0] for alias in node.names}
+    if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+        return {node.module.split(".")[0]}
+    return set()
+
+
+CORE_TREES = [(p, ast.parse(p.read_text(encoding="utf-8"))) for p in (SRC / "core").rglob("*.py")]
+
+
 def test_core_uses_only_the_standard_library() -> None:
-    allowed_third_party: set[str] = set()
-    for path in (SRC / "core").rglob("*.py"):
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+    stdlib = frozenset(sys.stdlib_module_names)
+    for path, tree in CORE_TREES:
         for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                tops = {a.name.split(".")[0] for a in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                tops = {node.module.split(".")[0]}
-            else:
-                continue
-            for top in tops - {"smoothjog", "__future__"} - allowed_third_party:
-                assert top in _stdlib(), f"{path.name} imports {top}, which is not stdlib"
-
-
-def _stdlib() -> frozenset[str]:
-    import sys
-
-    return frozenset(sys.stdlib_module_names)
+            for top in _top_modules(node) - {"smoothjog", "__future__"}:
+                assert top in stdlib, f"{path.name} imports {top}, which is not stdlib"
 
 
 def test_core_reads_no_clock_and_does_no_io() -> None:
     banned_modules = {"time", "asyncio", "socket", "os", "serial", "threading", "select"}
-    for path in (SRC / "core").rglob("*.py"):
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+    for path, tree in CORE_TREES:
         for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                tops = {a.name.split(".")[0] for a in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                tops = {node.module.split(".")[0]}
-            else:
-                tops = set()
+            tops = _top_modules(node)
             assert not tops & banned_modules, f"core/{path.name} imports {tops & banned_modules}"
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
                 assert node.func.id not in {"open", "print", "input"}, (
