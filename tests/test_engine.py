@@ -305,3 +305,81 @@ def test_inch_reports_are_understood_and_jogs_stay_in_mm() -> None:
     assert mpos is not None
     assert mpos[0] == pytest.approx(start[0] - 25.4, abs=0.003)  # the model holds mm
     assert all("G21" in line for line in lines if line.startswith("$J="))
+
+
+def _moved_after(vs: VirtualSession, t_s: float) -> float:
+    from bench import measure
+
+    return measure.distance_after(vs.rig.trace, t_s)
+
+
+def test_door_mid_jog_leaves_at_most_one_increment_and_cancels_it_on_resume() -> None:
+    vs = session()
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.0)
+    vs.rig.host_send(b"\x84", vs.now_s)  # the safety door opens
+    vs.run_until(vs.now_s + 0.5)
+    engine = vs.engine
+    assert engine is not None
+    assert engine.phase is Phase.IDLE
+    assert any("door" in e.text for e in engine.events)
+    assert vs.model.state == "Door"
+    t_resume = vs.now_s
+    vs.rig.host_send(b"~", vs.now_s)
+    vs.run_until(vs.now_s + 2.0)
+    # A line still in the controller when the door opened runs after the resume (facts §3.1);
+    # the engine cancels it at once, so the machine moves at most one increment's worth.
+    assert _moved_after(vs, t_resume) <= 1.5
+    assert vs.model.state == "Idle"
+    assert not engine.busy()
+
+
+def test_an_outside_hold_then_a_turn_never_enters_a_keep_out_zone() -> None:
+    zone = KeepOut("vise", (-420.0, -420.0, -100.0), (-380.0, -380.0, 0.0))
+    vs = session(keepouts=(zone,))
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.2)
+    vs.rig.host_send(b"!", vs.now_s)  # someone else's feed hold: acts as a jog cancel in Jog
+    vs.run_until(vs.now_s + 0.3)
+    vs.set_intent(ContinuousIntent({"Y": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 1.0)
+    vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+    vs.run_until(vs.now_s + 4.0)
+    vs.set_intent(StopIntent())
+    vs.run_until_idle(5.0)
+    for seg in vs.rig.trace:
+        for p in (seg.start_mm, seg.end_mm):
+            assert not (-420 < p[0] < -380 and -420 < p[1] < -380), f"inside the vise at {p}"
+
+
+def test_a_step_to_the_exact_edge_after_a_cancel_never_meets_error_15() -> None:
+    vs = session()
+    vs.set_intent(ContinuousIntent({"X": 1.0}, 0.05))  # toward the + edge, 1 mm away
+    vs.run_until(vs.now_s + 0.25)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(3.0)
+    x = vs.rig.firmware.mpos_mm()[0]
+    vs.set_intent(StepIntent("X", round(-x, 3), 0.2))
+    vs.run_until_idle(3.0)
+    engine = vs.engine
+    assert engine is not None
+    assert engine.stats.soft_limit_errors == 0
+    assert vs.rig.firmware.mpos_mm()[0] <= 0.0
+
+
+def test_a_stick_pushed_while_a_step_settles_is_kept() -> None:
+    vs = session()
+    vs.set_intent(StepIntent("X", -20.0, 0.5))
+    vs.run_until(vs.now_s + 0.1)
+    y0 = vs.rig.firmware.mpos_mm()[1]
+    vs.set_intent(ContinuousIntent({"Y": -1.0}, 0.5))
+    vs.run_until(vs.now_s + 2.0)
+    assert vs.rig.firmware.mpos_mm()[1] < y0 - 5.0
+
+
+def test_a_very_slow_jog_still_moves() -> None:
+    vs = session()
+    x0 = vs.rig.firmware.mpos_mm()[0]
+    vs.set_intent(ContinuousIntent({"X": -0.01}, 0.05))  # 2.5 mm/min
+    vs.run_until(vs.now_s + 3.0)
+    assert vs.rig.firmware.mpos_mm()[0] < x0 - 0.05

@@ -14,7 +14,7 @@ import contextlib
 import logging
 from collections.abc import Callable, Mapping, Sequence
 
-from smoothjog.core.errors import LinkError
+from smoothjog.core.errors import LinkError, SmoothjogError
 from smoothjog.core.jogger import (
     ContinuousIntent,
     EngineEvent,
@@ -55,6 +55,8 @@ class JogSession:
         self.model = MachineModel()
         self.engine: Jogger | None = None
         self.link_error: LinkError | None = None
+        #: An unexpected failure inside the session (it stopped driving the machine).
+        self.error: BaseException | None = None
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._rehandshaking = False
@@ -81,9 +83,9 @@ class JogSession:
                 await self.wait_idle(stop_timeout_s)
         for task in self._tasks:
             task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, LinkError):
-                await task
+        # A task that died earlier has its error stored in self.error already; closing the
+        # link must not be skipped because of it.
+        await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks = []
         await self.link.close()
 
@@ -150,6 +152,19 @@ class JogSession:
             self.link_error = exc
             logger.error("%s", exc)
             self._wake.set()
+        except SmoothjogError as exc:  # e.g. a controller that keeps resetting
+            self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        """Something broke inside the session: stop the machine if possible and say so."""
+        self.error = exc
+        logger.error("smoothjog stopped driving the controller: %s", exc)
+        with contextlib.suppress(LinkError, ValueError):
+            # Cancel whatever jog runs: the engine can no longer finish its handshake.
+            self.link.send_realtime(b"\x85")
+        if self.link_error is None:
+            self.link_error = LinkError(f"the session stopped: {exc}")
+        self._wake.set()
 
     async def _rehandshake(self) -> None:
         """The controller reset mid-session: read its settings again before any jog."""
@@ -162,21 +177,31 @@ class JogSession:
 
     async def _ticker(self) -> None:
         engine = self._engine()
-        while self.link_error is None:
-            if not self._rehandshaking:
-                now = self._now()
-                for output in engine.poll(now):
-                    if isinstance(output, SendLine):
-                        await self.link.send_line(output.text)
-                    else:
-                        self.link.send_realtime(output.byte)
-                self._flush_events()
-                deadline = engine.next_deadline_s(now)
-            else:
-                deadline = self._now() + 0.01
-            self._wake.clear()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), max(deadline - self._now(), 0.0))
+        try:
+            while self.link_error is None:
+                # Cleared before polling: a wake-up set while the outputs are written is kept.
+                self._wake.clear()
+                if not self._rehandshaking:
+                    now = self._now()
+                    for output in engine.poll(now):
+                        if isinstance(output, SendLine):
+                            await self.link.send_line(output.text)
+                        else:
+                            self.link.send_realtime(output.byte)
+                    self._flush_events()
+                    deadline = engine.next_deadline_s(now)
+                else:
+                    deadline = self._now() + 0.01
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a
+                # cancellation that lands as the event fires, and close() would wait forever.
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(max(deadline - self._now(), 0.0)):
+                        await self._wake.wait()
+        except LinkError as exc:
+            self.link_error = exc
+            logger.error("%s", exc)
+        except Exception as exc:  # a bug must stop the machine, not vanish quietly
+            self._fail(exc)
 
     def _flush_events(self) -> None:
         engine = self._engine()
@@ -185,4 +210,7 @@ class JogSession:
             log = logger.warning if event.kind == "fault" else logger.info
             log("%s%s", event.text, f" ({event.hint})" if event.hint else "")
             if self.on_event is not None:
-                self.on_event(event)
+                try:
+                    self.on_event(event)
+                except Exception:  # a listener's bug must not stop the machine's driver
+                    logger.exception("an event listener failed")

@@ -14,6 +14,7 @@ returns `Output`s for the driver to send.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -35,15 +36,27 @@ from smoothjog.core.responses import (
     Response,
     StatusReport,
 )
-from smoothjog.core.units import Vec, mm_min_to_mm_s, mm_s_to_mm_min, norm
+from smoothjog.core.units import (
+    Vec,
+    limit_by_axis_maximum,
+    mm_min_to_mm_s,
+    mm_s_to_mm_min,
+    norm,
+    unit,
+)
 
 JOG_CANCEL = b"\x85"
 STATUS_QUERY = b"?"
 SYNC_LINE = "G4P0"
+#: Grbl's slowest feed (MINIMUM_FEED_RATE, 1 mm/min, facts §4.2), in mm/s.
+MIN_FEED_MM_S = 1.0 / 60.0
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 32
 #: Distance of finished path kept behind the estimate (a stop is judged against the path ahead).
 PATH_KEEP_MM = 20.0
+#: At most this many jogs are remembered (a slow jog makes many short ones); far more than
+#: the planner can hold, so every jog not yet run is always kept.
+PATH_KEEP_SEGMENTS = 96
 
 #: Controller states in which a jog is accepted (facts §1.4).
 JOG_STATES = frozenset({"Idle", "Jog"})
@@ -176,6 +189,7 @@ class EngineLimits:
     envelope: TravelBox | None
     keepouts: tuple[KeepOut, ...]
     firmware: str
+    junction_deviation_mm: float = 0.01
 
     @classmethod
     def from_model(cls, model: MachineModel, keepouts: Sequence[KeepOut] = ()) -> EngineLimits:
@@ -200,6 +214,7 @@ class EngineLimits:
             envelope=model.soft_limit_envelope(),
             keepouts=tuple(keepouts) or model.keep_outs,
             firmware=model.firmware,
+            junction_deviation_mm=s.junction_deviation_mm,
         )
 
 
@@ -231,6 +246,7 @@ class _PathSeg:
     accel_mm_s2: float
     x0_mm: float  # distance along the engine's path where this jog starts
     acked: bool = False
+    entry_cap_mm_s: float = 0.0  # fastest the planner lets the machine enter it (junction)
 
 
 @dataclass
@@ -306,6 +322,8 @@ class Jogger:
         self._intent: ContinuousIntent | None = None
         self._acted_intent: ContinuousIntent | None = None
         self._stop_requested = False
+        self._cancel_owed = False
+        self._pending_desync = False
         self._ratios = dict(self.tuning.speed_ratios)
         self._pending: deque[_Pending] = deque()
         self._pending_bytes = 0
@@ -353,9 +371,17 @@ class Jogger:
     def _act_on_intent(self, now_s: float) -> None:
         """Turn the newest intent into a phase change (called from poll)."""
         intent = self._intent
+        if self._cancel_owed and self.model.state in JOG_STATES and self.phase is Phase.IDLE:
+            # Lines left in the controller when a door or hold stopped us: cancel them now.
+            self._cancel_owed = False
+            self._begin_stop(now_s)
+            self._stop_cancelled = True
         if self._stop_requested:
             self._stop_requested = False
-            if intent is None and self.phase in (Phase.STEPPING, Phase.SETTLING):
+            if intent is None and (
+                self.phase in (Phase.STEPPING, Phase.SETTLING)
+                or (self.phase is Phase.IDLE and self.model.state == "Jog")
+            ):
                 self._begin_stop(now_s)
         if self.phase is Phase.JOGGING:
             if intent is None:
@@ -401,6 +427,9 @@ class Jogger:
             self._abandon_motion()
         elif isinstance(resp, Message) and resp.text == "Check Door":
             self._fault_now(now_s, "the safety door opened", "close the door and resume (~)")
+            # The door already cancels the jog; send nothing more (lines in the controller's
+            # buffer would run after the resume) and cancel those still unanswered then.
+            self._abandon_motion()
 
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset)."""
@@ -421,13 +450,21 @@ class Jogger:
                 self.phase = Phase.STEPPING
             elif self._intent is not None and self._may_jog():
                 self._start_jogging(now_s)
-        if self.phase is Phase.JOGGING:
-            if not self._may_jog():
-                self._begin_stop(now_s)
-            else:
-                self._stream(now_s, out)
-        if self.phase is Phase.STEPPING:
-            self._stream_steps(now_s, out)
+        try:
+            if self.phase is Phase.JOGGING:
+                if not self._may_jog():
+                    self._begin_stop(now_s)
+                else:
+                    self._stream(now_s, out)
+            if self.phase is Phase.STEPPING:
+                self._stream_steps(now_s, out)
+        except JogBuildError as exc:
+            # A line that cannot be written (a value no axis can reach, say): never send it,
+            # stop what runs, and say why; the driver keeps running.
+            self._fault_now(now_s, f"jog not sent: {exc}", "check the intent that asked for it")
+            self._intent = None
+            self._steps.clear()
+            self._begin_stop(now_s)
         if self.phase is Phase.STOPPING:
             self._advance_stop(now_s, out)
         self._poll_status(now_s, out)
@@ -451,7 +488,10 @@ class Jogger:
             intent.axes.get(axis, 0.0) * self._ratios.get(axis, 1.0) * base_mm_s
             for axis in self.limits.axes
         )
-        return inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
+        move = inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
+        if move is None or move.speed_mm_s < MIN_FEED_MM_S:
+            return None  # below Grbl's 1 mm/min floor the stick is as good as neutral
+        return move
 
     def _max_feed_mm_min(self) -> float:
         return self.tuning.max_feed_mm_min or max(self.limits.max_rate_mm_min)
@@ -462,7 +502,7 @@ class Jogger:
             return  # no position yet: wait for the first status report
         self.phase = Phase.JOGGING
         self._path.clear()
-        self._path_end_mm = tuple(mpos)
+        self._path_end_mm = self._on_step_grid(mpos)
         self._x_est_mm = 0.0
         self._v_est_mm_s = 0.0
         self._est_s = now_s
@@ -487,6 +527,20 @@ class Jogger:
             inc.min_block_s(move.speed_mm_s, move.accel_mm_s2, self.limits.planner_blocks),
             inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2)
             / (move.speed_mm_s * (usable - 1)),
+            # A very slow jog still moves at least a step and a half per block: shorter blocks
+            # are all rounding (Grbl plans a block under half a step as nothing).
+            1.5 * self._step_along_mm(move.unit_vec) / move.speed_mm_s,
+        )
+
+    def _step_along_mm(self, unit_vec: Sequence[float]) -> float:
+        """Distance along unit_vec in which the busiest axis makes one step."""
+        return min(
+            (
+                1.0 / (spm * abs(u))
+                for u, spm in zip(unit_vec, self.limits.steps_per_mm, strict=True)
+                if u
+            ),
+            default=1.0 / max(self.limits.steps_per_mm),
         )
 
     def _stream(self, now_s: float, out: list[Output]) -> None:
@@ -553,7 +607,7 @@ class Jogger:
         seg = _PathSeg(
             start, end, seg_len, move.speed_mm_s, move.accel_mm_s2, self._path_length_mm()
         )
-        self._path.append(seg)
+        self._append_seg(seg)
         self._path_end_mm = end
         self._send(line, "jog", now_s, out, seg)
         return True
@@ -563,12 +617,12 @@ class Jogger:
     ) -> tuple[inc.VectorMove, float] | None:
         """Shorten (or slide) an increment so it stays in the envelope and out of keep-outs."""
         vel = list(move.velocity_mm_s)
-        step_mm = 1.0 / max(self.limits.steps_per_mm)
         inset = self._inset_mm()
         for _ in range(len(vel) + 1):
             m = inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
             if m is None:
                 return None
+            step_mm = self._step_along_mm(m.unit_vec)
             t = length_mm
             blocked: int | None = None
             env = self.limits.envelope
@@ -590,6 +644,23 @@ class Jogger:
             # Blocked within a step: drop the blocked axis and slide along the boundary.
             vel[blocked] = 0.0
         return None
+
+    def _on_step_grid(self, mpos: Sequence[float]) -> Vec:
+        """A reported position (3 decimals) put back on the step grid Grbl counts in.
+
+        After a stop Grbl's parser position is the exact step count; the report rounds it.
+        Starting a G91 chain from the rounded value would shift every target by up to
+        0.0005 mm, enough to meet error:15 at the edge of the envelope.
+        """
+        return tuple(
+            round(p * spm) / spm for p, spm in zip(mpos, self.limits.steps_per_mm, strict=True)
+        )
+
+    def _steps_from(self, a: Sequence[float], b: Sequence[float]) -> float:
+        """Distance between two positions in steps of the worst axis."""
+        return max(
+            abs(x - y) * spm for x, y, spm in zip(a, b, self.limits.steps_per_mm, strict=True)
+        )
 
     def _inset_mm(self) -> float:
         # One step of margin keeps float rounding in the firmware from tipping a target over
@@ -640,6 +711,7 @@ class Jogger:
             )
         if not (0.0 < intent.speed <= 1.0):
             raise JogBuildError(f"step speed {intent.speed!r} must be in (0, 1]")
+        self._check_feed(intent.speed)
 
     def _validate_goto(self, intent: GotoIntent) -> None:
         for axis, value in intent.target_mpos_mm.items():
@@ -651,6 +723,14 @@ class Jogger:
             raise JogBuildError("a go-to needs at least one axis target")
         if not (0.0 < intent.speed <= 1.0):
             raise JogBuildError(f"go-to speed {intent.speed!r} must be in (0, 1]")
+        self._check_feed(intent.speed)
+
+    def _check_feed(self, speed: float) -> None:
+        feed_mm_min = self._max_feed_mm_min() * speed
+        if feed_mm_min < 1.0:
+            raise JogBuildError(
+                f"speed {speed!r} gives {feed_mm_min:.3g} mm/min, below Grbl's 1 mm/min minimum"
+            )
 
     def _validate_continuous(self, intent: ContinuousIntent) -> None:
         for axis, value in intent.axes.items():
@@ -670,7 +750,7 @@ class Jogger:
             if self.model.mpos_mm is None:
                 return
             self._path.clear()
-            self._path_end_mm = tuple(self.model.mpos_mm)
+            self._path_end_mm = self._on_step_grid(self.model.mpos_mm)
             self._x_est_mm = 0.0
             self._v_est_mm_s = 0.0
             self._est_s = now_s
@@ -685,7 +765,7 @@ class Jogger:
             if not self._fits_rx(line):
                 return
             self._steps.popleft()
-            self._path.append(seg)
+            self._append_seg(seg)
             self._path_end_mm = seg.end_mm
             self._send(line, "jog", now_s, out, seg)
         if not self._steps and not self._pending:
@@ -759,7 +839,7 @@ class Jogger:
         if self._stop_phase is _Stop.WAIT_ACKS:
             if any(p.kind == "jog" for p in self._pending):
                 return  # a cancel now would let these lines run on (facts §3.1)
-            if self._path:
+            if self._path or self._stop_cancelled or self.model.state == "Jog":
                 out.append(SendRealtime(JOG_CANCEL))
                 self._stop_cancelled = True
                 self.stats.cancels += 1
@@ -805,8 +885,6 @@ class Jogger:
         self._v_est_mm_s = 0.0
         self._commanded = inc.VectorMove((0.0,) * len(self.limits.axes), 0.0, 1.0)
         self.phase = Phase.IDLE
-        if not self._restart_after_stop and not self._steps:
-            self._intent = None
         self._restart_after_stop = False
 
     def _tracking_error(self, mpos: Vec, *, cancelled: bool) -> tuple[float, float]:
@@ -831,11 +909,17 @@ class Jogger:
         return math.dist(best_ref, mpos), best_steps
 
     def _abandon_motion(self) -> None:
-        """Forget the queued path (after an alarm or reset): nothing more is sent."""
+        """Forget the queued path (door, hold, alarm, reset): nothing more is sent.
+
+        Jog lines still unanswered sit in the controller's buffer and run once it resumes
+        (facts §3.1-§3.3): a cancel is owed, sent as soon as the state is Idle or Jog again.
+        """
+        self._cancel_owed = any(p.kind == "jog" for p in self._pending)
         self._path.clear()
         self._path_end_mm = None
         self._steps.clear()
         self._intent = None
+        self._acted_intent = None
         self._restart_after_stop = False
         self.phase = Phase.IDLE
 
@@ -859,11 +943,10 @@ class Jogger:
             return
         if isinstance(resp, Ok):
             pending.seg.acked = True
-            # An ok can wait behind a status report on the way back; the line itself was planned
-            # on time. The lower quartile of recent latencies tracks the outbound time and still
-            # follows a link that gets slower.
+            # The upper quartile of recent latencies: it follows a jittery link, yet one ok
+            # delayed behind a status report on the way back does not move it.
             self._rtts.append(now_s - pending.sent_s)
-            self._rtt_s = sorted(self._rtts)[len(self._rtts) // 4]
+            self._rtt_s = sorted(self._rtts)[(3 * len(self._rtts)) // 4]
             if not self._moving_since_ack:
                 self._moving_since_ack = True
                 self._est_s = now_s
@@ -903,15 +986,57 @@ class Jogger:
             self.phase = Phase.SETTLING
             self._status_wanted_after_s = now_s
             return
+        if self._pending_desync:
+            self._pending_desync = False
+            if self.phase is Phase.JOGGING:
+                self._fault_now(
+                    now_s,
+                    "the machine left the path smoothjog sent (stopped or moved from elsewhere)",
+                    "release the stick and jog again",
+                )
+                self._intent = None
+                self._acted_intent = None
+                self._begin_stop(now_s)
+                return
+        if report.pins and ("H" in report.pins or "D" in report.pins) and self.phase in (
+            Phase.JOGGING,
+            Phase.STEPPING,
+            Phase.SETTLING,
+        ):
+            # The hold button or the door switch is pressed: the controller is stopping the jog.
+            self._fault_now(
+                now_s,
+                "the controller's feed-hold or door input is active",
+                "release it, resume with ~, and jog again",
+            )
+            self._abandon_motion()
+            return
         if (
             state == "Idle"
             and self.phase is Phase.JOGGING
-            and not any(p.kind == "jog" for p in self._pending)
+            and self._moving_since_ack
             and self._path
+            and mpos is not None
         ):
-            # Every jog was answered and the machine rests: the whole queue has run.
-            self._x_est_mm = self._path_length_mm()
-            self._v_est_mm_s = 0.0
+            at_end = self._steps_from(mpos, self._path[-1].end_mm) <= 2.0
+            if at_end and not any(p.kind == "jog" for p in self._pending):
+                # Every jog was answered and the machine rests at the end: the queue has run
+                # (at the edge of the envelope, or a host that could not keep up).
+                self._x_est_mm = self._path_length_mm()
+                self._v_est_mm_s = 0.0
+            elif not at_end:
+                # At rest short of the queued end while jogging: something else
+                # stopped the jog (a feed hold or jog cancel from a button or another client).
+                # Grbl re-synced its parser to where it stopped, so every further G91 increment
+                # would be off: sync, forget the path, and wait for a fresh intent.
+                self._fault_now(
+                    now_s,
+                    "the jog was stopped outside smoothjog (a feed hold or cancel)",
+                    "release the stick and jog again",
+                )
+                self._intent = None
+                self._acted_intent = None
+                self._begin_stop(now_s)
         fresh = self._status_wanted_after_s is not None
         if state not in JOG_STATES and state != "Run":
             self._status_wanted_after_s = None
@@ -933,8 +1058,9 @@ class Jogger:
         asked = self._status_asked_s
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
+        settled = self._x_est_mm >= self._path_length_mm() - 1e-9 and self._v_est_mm_s == 0.0
         urgent = self._status_wanted_after_s is not None and (
-            self.phase is Phase.SETTLING
+            (self.phase is Phase.SETTLING and settled)
             or (self.phase is Phase.STOPPING and self._stop_phase is _Stop.WAIT_STATUS)
         )
         busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
@@ -1004,24 +1130,75 @@ class Jogger:
         h = dt / steps
         end_x = self._path_length_mm()
         for _ in range(steps):
-            seg = self._seg_at(self._x_est_mm)
-            if seg is None:
+            index = self._seg_index_at(self._x_est_mm)
+            if index is None:
                 self._v_est_mm_s = 0.0
                 self._x_est_mm = end_x
                 return
-            a = seg.accel_mm_s2
-            v_cap = min(seg.speed_mm_s, math.sqrt(2.0 * a * max(end_x - self._x_est_mm, 0.0)))
+            a = self._path[index].accel_mm_s2
+            v_cap = self._speed_cap_mm_s(index)
             if self._v_est_mm_s < v_cap:
                 self._v_est_mm_s = min(v_cap, self._v_est_mm_s + a * h)
             else:
                 self._v_est_mm_s = max(v_cap, self._v_est_mm_s - a * h)
             self._x_est_mm = min(self._x_est_mm + self._v_est_mm_s * h, end_x)
 
-    def _seg_at(self, x_mm: float) -> _PathSeg | None:
-        for seg in self._path:
-            if seg.x0_mm <= x_mm < seg.x0_mm + seg.length_mm:
-                return seg
+    def _append_seg(self, seg: _PathSeg) -> None:
+        """Add a sent jog to the path, with the speed the planner allows at its start."""
+        if self._path:
+            prev = self._path[-1]
+            seg.entry_cap_mm_s = min(
+                seg.speed_mm_s, prev.speed_mm_s, self._junction_speed_mm_s(prev, seg)
+            )
+        self._path.append(seg)
+
+    def _junction_speed_mm_s(self, prev: _PathSeg, seg: _PathSeg) -> float:
+        """Grbl's junction-deviation speed limit between two jogs (facts §4.3)."""
+        u0 = unit(tuple(e - s for s, e in zip(prev.start_mm, prev.end_mm, strict=True)))
+        u1 = unit(tuple(e - s for s, e in zip(seg.start_mm, seg.end_mm, strict=True)))
+        cos_junction = -sum(a * b for a, b in zip(u0, u1, strict=True))
+        if cos_junction > 0.999999:
+            return 0.0
+        if cos_junction < -0.999999:
+            return math.inf
+        junction_unit = unit(tuple(b - a for a, b in zip(u0, u1, strict=True)))
+        accel = limit_by_axis_maximum(self.limits.accel_mm_s2, junction_unit)
+        sin_half = math.sqrt(0.5 * (1.0 - cos_junction))
+        return math.sqrt(
+            max(0.0, accel * self.limits.junction_deviation_mm * sin_half / (1.0 - sin_half))
+        )
+
+    def _speed_cap_mm_s(self, seg_index: int) -> float:
+        """The fastest the machine can be at the estimate, braking for what lies ahead.
+
+        Grbl plans so that every junction and slower block ahead is met at its allowed speed,
+        and the end of the queue at rest; the machine cannot be faster than that.
+        """
+        x = self._x_est_mm
+        path = self._path
+        seg = path[seg_index]
+        a = seg.accel_mm_s2
+        cap = seg.speed_mm_s
+        reach_mm = cap * cap / (2.0 * a)
+        for nxt in path[seg_index + 1 :]:
+            ahead = nxt.x0_mm - x
+            if ahead > reach_mm:
+                break
+            cap = min(cap, math.sqrt(nxt.entry_cap_mm_s**2 + 2.0 * a * max(ahead, 0.0)))
+        end_x = path[-1].x0_mm + path[-1].length_mm
+        return min(cap, math.sqrt(2.0 * a * max(end_x - x, 0.0)))
+
+    def _seg_index_at(self, x_mm: float) -> int | None:
+        """Index of the path segment containing x_mm (bisect: the path is sorted by x0)."""
+        path = self._path
+        i = bisect.bisect_right(path, x_mm, key=lambda seg: seg.x0_mm) - 1
+        if 0 <= i < len(path) and x_mm < path[i].x0_mm + path[i].length_mm:
+            return i
         return None
+
+    def _seg_at(self, x_mm: float) -> _PathSeg | None:
+        i = self._seg_index_at(x_mm)
+        return None if i is None else self._path[i]
 
     def _correct_estimate(self, mpos: Vec, age_s: float) -> None:
         """Pull the estimate onto the reported position (projected on the path).
@@ -1041,6 +1218,11 @@ class Jogger:
             if best is None or abs(x - self._x_est_mm) < abs(best - self._x_est_mm):
                 best = x
         if best is None:
+            if self.phase is Phase.JOGGING and not self._pending_desync:
+                # The machine is off every jog we sent: something moved or stopped it outside
+                # smoothjog (a feed hold, a cancel, another sender), and Grbl re-synced its G91
+                # origin. Further increments would land off the tracked path, so stop and sync.
+                self._pending_desync = True
             return
         # The report was built before its bytes crossed the wire: move it forward by that age.
         ahead = self._v_est_mm_s * age_s
@@ -1052,6 +1234,10 @@ class Jogger:
         drop = 0
         while drop < len(self._path) - 1 and (
             self._path[drop].x0_mm + self._path[drop].length_mm < keep_from
+            or (
+                len(self._path) - drop > PATH_KEEP_SEGMENTS
+                and self._path[drop].x0_mm + self._path[drop].length_mm < self._x_est_mm
+            )
         ):
             drop += 1
         if drop:

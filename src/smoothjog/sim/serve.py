@@ -64,8 +64,11 @@ class RealtimeSim:
             nxt = self.rig.next_event_s()
             self._wake.clear()
             timeout = None if nxt is None else max(0.0, nxt - self.now_s())
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a cancellation
+            # that lands as the event fires (a byte sent while closing), and run() never ends.
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), timeout)
+                async with asyncio.timeout(timeout):
+                    await self._wake.wait()
 
 
 @dataclass(frozen=True)
