@@ -116,9 +116,11 @@ class JogSession:
     async def wait_idle(self, timeout_s: float) -> None:
         """Wait until the engine is idle and the controller reports Idle; TimeoutError if not."""
         async with asyncio.timeout(timeout_s):
-            while self.busy() or self.model.state not in ("Idle", "Alarm", "Door", "Hold"):
+            while True:
                 if self.link_error is not None:
-                    raise self.link_error
+                    raise self.link_error  # a controller that is gone is not idle
+                if not self.busy() and self.model.state in ("Idle", "Alarm", "Door", "Hold"):
+                    return
                 await asyncio.sleep(0.01)
 
     def add_listener(self, callback: Callable[[], None]) -> None:

@@ -28,7 +28,8 @@ from smoothjog.links.sim import SimLink
 from smoothjog.session import JogSession
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import available_machine_profiles, get_firmware_profile
-from smoothjog.web.server import run_pendant
+from smoothjog.web.protocol import PendantError
+from smoothjog.web.server import is_loopback, run_pendant
 from smoothjog.web.session_backend import SessionBackend
 
 
@@ -61,6 +62,13 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run until Ctrl-C or SIGTERM."""
     config = config_from_args(args)
+    host = args.host or config.pendant.host
+    if not (args.lan or config.pendant.lan) and not is_loopback(host):
+        # Refused before anything starts: a pendant reachable from the network needs --lan.
+        raise PendantError(
+            f"refusing to serve the pendant on {host}: anyone on the network could jog the "
+            "machine; use --lan, which requires a pairing token, or bind 127.0.0.1"
+        )
     connection = connection_from_args(args, config)
     link = link_for(connection)
     if link is None:
@@ -105,14 +113,13 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
         server = asyncio.create_task(run_pendant(backend, host=host, port=port, lan=lan))
         waiter = asyncio.create_task(stop.wait())
         try:
-            done, _ = await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
-            if server in done:
-                server.result()  # a failure to listen: raises the PendantError sentence
+            await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
         finally:
             for task in (server, waiter):
                 task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
-            await session.close()
+            await asyncio.gather(server, waiter, return_exceptions=True)
+            await session.close()  # always: stop any jog with the handshake, then let go
+        if not server.cancelled() and server.exception() is not None:
+            raise server.exception()  # type: ignore[misc]  # e.g. the PendantError sentence
     print("smoothjog: stopped", flush=True)
     return 0

@@ -998,10 +998,15 @@ class Jogger:
                 self._acted_intent = None
                 self._begin_stop(now_s)
                 return
-        if report.pins and ("H" in report.pins or "D" in report.pins) and self.phase in (
-            Phase.JOGGING,
-            Phase.STEPPING,
-            Phase.SETTLING,
+        if (
+            report.pins
+            and ("H" in report.pins or "D" in report.pins)
+            and self.phase
+            in (
+                Phase.JOGGING,
+                Phase.STEPPING,
+                Phase.SETTLING,
+            )
         ):
             # The hold button or the door switch is pressed: the controller is stopping the jog.
             self._fault_now(

@@ -54,7 +54,8 @@ def load_replay(path: str | Path) -> list[TimedIntent]:
         raise ReplayError(f"replay file {p} does not exist: check the path") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ReplayError(f"cannot read replay file {p}: {exc}") from None
-    return parse_replay(text.splitlines(), source=str(p))
+    # split("\n"), not splitlines(): a form feed or U+2028 must not shift the line numbers.
+    return parse_replay(text.split("\n"), source=str(p))
 
 
 def parse_replay(lines: Iterable[str], *, source: str = "<replay>") -> list[TimedIntent]:
@@ -81,7 +82,9 @@ def parse_replay(lines: Iterable[str], *, source: str = "<replay>") -> list[Time
         if t < last_t:
             raise ReplayError(f"{where}: time {t} goes back before {last_t}; sort the lines")
         last_t = t
-        speed = _number(obj.get("speed", 1.0), where, "speed")
+        # Without "speed": full stick speed, and half for steps and go-tos as elsewhere.
+        default_speed = 0.5 if ("step" in obj or "goto" in obj) else 1.0
+        speed = _number(obj.get("speed", default_speed), where, "speed")
         if not 0.0 < speed <= 1.0:
             raise ReplayError(f"{where}: speed {speed} must be in (0, 1]")
         kinds = [k for k in ("axes", "step", "goto", "stop") if k in obj]
@@ -89,6 +92,8 @@ def parse_replay(lines: Iterable[str], *, source: str = "<replay>") -> list[Time
             raise ReplayError(f"{where}: give exactly one of axes, step, goto or stop")
         kind = kinds[0]
         if kind == "stop":
+            if obj["stop"] is not True:
+                raise ReplayError(f'{where}: "stop" must be true (leave the line out otherwise)')
             out.append(TimedIntent(t, StopIntent()))
         elif kind == "axes":
             axes = _axes(obj["axes"], where, "axes")

@@ -497,7 +497,8 @@ def format_banner(port: int, *, host: str, token: str | None, lan_address: str |
     return "\n".join(lines) + buffer.getvalue()
 
 
-def _is_loopback(host: str) -> bool:
+def is_loopback(host: str) -> bool:
+    """True for localhost and loopback addresses (all the pendant serves without --lan)."""
     if host == "localhost":
         return True
     try:
@@ -525,7 +526,7 @@ async def run_pendant(
         token = secrets.token_urlsafe(16)
         # LAN mode exists to be reachable from a phone; the token is what guards it.
         bind = "0.0.0.0"
-    elif not _is_loopback(host):
+    elif not is_loopback(host):
         raise PendantError(
             f"refusing to serve the pendant on {host}: anyone on the network could jog the "
             "machine; use --lan, which requires a pairing token, or bind 127.0.0.1"
@@ -539,7 +540,7 @@ async def run_pendant(
         except OSError as exc:
             raise PendantError(
                 f"cannot listen on {bind}:{port} ({exc.strerror}); is another smoothjog "
-                "running? choose another port with --port"
+                "running? choose another port with --http-port"
             ) from exc
         actual_port = _bound_port(runner, port)
         shown_host = "127.0.0.1" if lan else host
