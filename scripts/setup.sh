@@ -1,10 +1,15 @@
 #!/usr/bin/env bash
 # Shared set-up for scripts/run and scripts/test: a project virtualenv with smoothjog installed.
-# Usage: source scripts/setup.sh [extra]   (extra = "test" also installs test tools and Chromium)
+# Usage: source scripts/setup.sh run|test   ("test" also installs test tools and Chromium).
+# The mode is required: a sourced script sees its caller's arguments when given none.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
-EXTRA="${1:-}"
+case "${1:-}" in
+  run) EXTRA="" ;;
+  test) EXTRA="test" ;;
+  *) echo "setup.sh: say 'run' or 'test'" >&2; return 2 2>/dev/null || exit 2 ;;
+esac
 
 pick_python() {
   for py in python3.13 python3.12 python3.11 python3; do
