@@ -169,7 +169,7 @@ class JogTuning:
     poll_moving_s: float = 0.050
     poll_idle_s: float = 0.250
     #: Planner blocks the engine leaves free so an `ok` is never held back by a full planner.
-    planner_reserve_blocks: int = 2
+    planner_reserve_blocks: int = 3
     #: Re-ask for a status report if none came within this time.
     status_timeout_s: float = 0.5
 
@@ -509,8 +509,16 @@ class Jogger:
         self._moving_since_ack = False
 
     def _ahead_s(self, block_s: float) -> float:
-        """Queue time beyond the stopping distance: committed segments, round trip, one tick."""
-        committed = min(inc.committed_s(block_s), self.tuning.committed_s)
+        """Queue time beyond the stopping distance: committed segments, round trip, one tick.
+
+        The firmware commits segments of the blocks already queued, so the longest of those
+        (or of the next one) decides how much time five segments can hold.
+        """
+        longest_s = block_s
+        for seg in self._path:
+            if seg.x0_mm + seg.length_mm > self._x_est_mm and seg.speed_mm_s > 0.0:
+                longest_s = max(longest_s, seg.length_mm / seg.speed_mm_s)
+        committed = min(inc.committed_s(longest_s), self.tuning.committed_s)
         return committed + self._rtt_s + self.tuning.link_margin_s
 
     def _block_s(self, move: inc.VectorMove) -> float:
@@ -562,7 +570,13 @@ class Jogger:
                 return
             if self._blocks_in_planner() >= usable_blocks:
                 return
-            length_mm = move.speed_mm_s * block_s
+            # Blocks of the planned duration, but never so short that the queue needs more of
+            # them than the engine allows itself: while slowing from a higher speed the queue
+            # is sized for that speed, and 10 ms blocks at the new one would fill the planner.
+            length_mm = max(
+                move.speed_mm_s * block_s,
+                (target_mm - speed_mm_s * self.tuning.committed_s) / max(usable_blocks - 1, 1),
+            )
             if not self._path:
                 # The firmware commits ~50 ms of segments from the first block alone, planned
                 # to stop at its end; make it long enough that this ramp never turns to braking
