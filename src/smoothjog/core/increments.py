@@ -83,6 +83,8 @@ def committed_s(block_s: float, *, segment_s: float = 0.010, segments: int = 5) 
     if block_s <= 0.0:
         return segments * segment_s
     full = int(block_s // segment_s)
+    if full >= segments:
+        return segments * segment_s  # every window of segments is full ones
     rest = block_s - full * segment_s
     pattern = [segment_s] * full + ([rest] if rest > 1e-9 else [])
     if not pattern:

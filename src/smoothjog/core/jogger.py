@@ -515,8 +515,10 @@ class Jogger:
         (or of the next one) decides how much time five segments can hold.
         """
         longest_s = block_s
-        for seg in self._path:
-            if seg.x0_mm + seg.length_mm > self._x_est_mm and seg.speed_mm_s > 0.0:
+        for seg in reversed(self._path):  # the queued jogs are at the end of the path
+            if seg.x0_mm + seg.length_mm <= self._x_est_mm:
+                break
+            if seg.speed_mm_s > 0.0:
                 longest_s = max(longest_s, seg.length_mm / seg.speed_mm_s)
         committed = min(inc.committed_s(longest_s), self.tuning.committed_s)
         return committed + self._rtt_s + self.tuning.link_margin_s
@@ -559,16 +561,18 @@ class Jogger:
         n_blocks = self.limits.planner_blocks
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
         block_s = self._block_s(move)
+        ahead_s = self._ahead_s(block_s)
+        blocks = self._blocks_in_planner()
         for _ in range(n_blocks):
             queued_mm = self._queued_mm()
             # While the machine is still faster than the new speed (a slowdown), size the queue
             # for the speed it has: the slower blocks must be queued before the faster ones run
             # out, or the planner brakes below the new speed.
             speed_mm_s = max(move.speed_mm_s, self._v_est_mm_s)
-            target_mm = inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, self._ahead_s(block_s))
+            target_mm = inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, ahead_s)
             if queued_mm >= target_mm:
                 return
-            if self._blocks_in_planner() >= usable_blocks:
+            if blocks >= usable_blocks:
                 return
             # Blocks of the planned duration, but never so short that the queue needs more of
             # them than the engine allows itself: while slowing from a higher speed the queue
@@ -585,6 +589,7 @@ class Jogger:
                 length_mm = max(length_mm, min(move.accel_mm_s2 * ramp_s**2, target_mm))
             if not self._send_increment(move, length_mm, now_s, out):
                 return
+            blocks += 1
 
     def _send_increment(
         self, move: inc.VectorMove, length_mm: float, now_s: float, out: list[Output]
@@ -1133,7 +1138,12 @@ class Jogger:
     def _blocks_in_planner(self) -> int:
         """Jogs sent whose end the machine has not yet reached, less those already committed."""
         committed_end = self._x_est_mm + self._v_est_mm_s * self.tuning.committed_s
-        return sum(1 for s in self._path if s.x0_mm + s.length_mm > committed_end)
+        count = 0
+        for seg in reversed(self._path):  # queued jogs are at the end; stop at the first done
+            if seg.x0_mm + seg.length_mm <= committed_end:
+                break
+            count += 1
+        return count
 
     def _update_estimate(self, now_s: float) -> None:
         """Advance the estimated progress along the path with the firmware's own kinematics."""
