@@ -886,7 +886,11 @@ class Jogger:
     def _finish_stop(self, report: StatusReport, now_s: float) -> None:
         mpos = self.model.mpos_mm
         if mpos is not None:
-            err_mm, err_steps = self._tracking_error(mpos, cancelled=self._stop_cancelled)
+            # The report rounds to 0.001 mm; the step counts behind it are exact (a step is
+            # over 0.002 mm on any axis this is meant for), so compare on the step grid.
+            err_mm, err_steps = self._tracking_error(
+                self._on_step_grid(mpos), cancelled=self._stop_cancelled
+            )
             self.stats.stops.append(
                 StopRecord(
                     now_s,
@@ -1043,13 +1047,17 @@ class Jogger:
             and mpos is not None
         ):
             at_end = self._steps_from(mpos, self._path[-1].end_mm) <= 2.0
+            planned = [seg for seg in self._path if seg.acked]
+            # Resting where the planned (acknowledged) jogs end is a queue that ran dry, not an
+            # outside stop: the lines still on their way will start it again.
+            at_planned_end = bool(planned) and self._steps_from(mpos, planned[-1].end_mm) <= 2.0
             if at_end and not any(p.kind == "jog" for p in self._pending):
                 # Every jog was answered and the machine rests at the end: the queue has run
                 # (at the edge of the envelope, or a host that could not keep up).
                 self._x_est_mm = self._path_length_mm()
                 self._v_est_mm_s = 0.0
-            elif not at_end:
-                # At rest short of the queued end while jogging: something else
+            elif not at_end and not at_planned_end:
+                # At rest short of the planned end while jogging: something else
                 # stopped the jog (a feed hold or jog cancel from a button or another client).
                 # Grbl re-synced its parser to where it stopped, so every further G91 increment
                 # would be off: sync, forget the path, and wait for a fresh intent.
@@ -1260,12 +1268,15 @@ class Jogger:
     def _prune_path(self) -> None:
         """Forget jogs the machine finished long ago (the path would grow without end)."""
         keep_from = self._x_est_mm - PATH_KEEP_MM
+        # Never forget what the next status reports can still show: their position is a few
+        # milliseconds old, so keep well over that much path behind the estimate.
+        recent_from = self._x_est_mm - (1.0 + self._v_est_mm_s * 0.3)
         drop = 0
         while drop < len(self._path) - 1 and (
             self._path[drop].x0_mm + self._path[drop].length_mm < keep_from
             or (
                 len(self._path) - drop > PATH_KEEP_SEGMENTS
-                and self._path[drop].x0_mm + self._path[drop].length_mm < self._x_est_mm
+                and self._path[drop].x0_mm + self._path[drop].length_mm < recent_from
             )
         ):
             drop += 1
