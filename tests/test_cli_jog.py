@@ -30,7 +30,12 @@ def child_env() -> dict[str, str]:
 
 def run_jog(*args: str, timeout_s: float = RUN_TIMEOUT_S) -> subprocess.CompletedProcess[str]:
     """Run `python -m smoothjog jog ARGS` to completion and capture its output."""
-    argv = [sys.executable, "-m", "smoothjog", "jog", *args]
+    return run_smoothjog("jog", *args, timeout_s=timeout_s)
+
+
+def run_smoothjog(*args: str, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    """Run `python -m smoothjog ARGS` to completion (or fail the test) and capture its output."""
+    argv = [sys.executable, "-m", "smoothjog", *args]
     with subprocess.Popen(
         argv,
         stdout=subprocess.PIPE,
@@ -45,7 +50,7 @@ def run_jog(*args: str, timeout_s: float = RUN_TIMEOUT_S) -> subprocess.Complete
             proc.kill()
             out, err = proc.communicate()
             pytest.fail(
-                f"`smoothjog jog {' '.join(args)}` did not exit within {timeout_s} s;"
+                f"`smoothjog {' '.join(args)}` did not exit within {timeout_s} s;"
                 f" stdout {out!r}, stderr {err!r}"
             )
     return subprocess.CompletedProcess(argv, proc.returncode, out, err)

@@ -4,37 +4,18 @@ from __future__ import annotations
 
 import socket
 import subprocess
-import sys
 import urllib.request
 
 import pytest
 
-from tests.test_cli_jog import Child, child_env
+from tests.test_cli_jog import Child, run_smoothjog
 
 STARTUP_TIMEOUT_S = 30.0
 
 
 def run_pendant(*args: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
     """Run `python -m smoothjog ARGS` (the default command) for a failure that ends it."""
-    argv = [sys.executable, "-m", "smoothjog", *args]
-    with subprocess.Popen(
-        argv,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        encoding="utf-8",
-        env=child_env(),
-    ) as proc:
-        try:
-            out, err = proc.communicate(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, err = proc.communicate()
-            pytest.fail(
-                f"`smoothjog {' '.join(args)}` did not exit within {timeout_s} s;"
-                f" stdout {out!r}, stderr {err!r}"
-            )
-    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+    return run_smoothjog(*args, timeout_s=timeout_s)
 
 
 def fetch(url: str) -> tuple[int, str, str]:
