@@ -93,6 +93,30 @@ def committed_s(block_s: float, *, segment_s: float = 0.010, segments: int = 5) 
     return max(sum(pattern[(start + k) % n] for k in range(segments)) for start in range(n))
 
 
+def junction_speed_sqr(
+    prev_unit: Sequence[float],
+    unit_vec: Sequence[float],
+    accel_mm_s2: Sequence[float],
+    deviation_mm: float,
+) -> float:
+    """Grbl's junction-deviation limit (squared speed) between two moves (facts §4.3).
+
+    0 for a full reversal, 1e38 (no limit) straight on; otherwise a·δ·s/(1−s) with s the sine
+    of half the junction angle and a the per-axis-limited acceleration along u − u_prev.
+    """
+    cos_junction = -sum(p * u for p, u in zip(prev_unit, unit_vec, strict=True))
+    if cos_junction > 0.999999:
+        return 0.0  # a full reversal: stop at the junction
+    if cos_junction < -0.999999:
+        return 1e38  # straight on: no junction limit
+    diff = tuple(u - p for u, p in zip(unit_vec, prev_unit, strict=True))
+    diff_len = math.sqrt(sum(c * c for c in diff))
+    junction_unit = tuple(c / diff_len for c in diff)
+    junction_accel = limit_by_axis_maximum(accel_mm_s2, junction_unit)
+    sin_half = math.sqrt(0.5 * (1.0 - cos_junction))
+    return max(0.0, junction_accel * deviation_mm * sin_half / (1.0 - sin_half))
+
+
 def let_run_turn_s(
     queued_mm: float, speed_mm_s: float, new_speed_mm_s: float, accel_mm_s2: float, *, reverse: bool
 ) -> float:

@@ -38,7 +38,6 @@ from smoothjog.core.responses import (
 )
 from smoothjog.core.units import (
     Vec,
-    limit_by_axis_maximum,
     mm_min_to_mm_s,
     mm_s_to_mm_min,
     norm,
@@ -340,7 +339,6 @@ class Jogger:
         self._restart_after_stop = False
         self._status_asked_s: float | None = None
         self._status_wanted_after_s: float | None = None
-        self._last_poll_s = -math.inf
         self._last_status_sent_s = -math.inf
         self._rtt_s = 0.003  # time for a jog line to be planned: a low percentile of its ok latency
         self._rtts: deque[float] = deque(maxlen=RTT_WINDOW)
@@ -468,7 +466,6 @@ class Jogger:
         if self.phase is Phase.STOPPING:
             self._advance_stop(now_s, out)
         self._poll_status(now_s, out)
-        self._last_poll_s = now_s
         return out
 
     def next_deadline_s(self, now_s: float) -> float:
@@ -1193,16 +1190,10 @@ class Jogger:
         """Grbl's junction-deviation speed limit between two jogs (facts §4.3)."""
         u0 = unit(tuple(e - s for s, e in zip(prev.start_mm, prev.end_mm, strict=True)))
         u1 = unit(tuple(e - s for s, e in zip(seg.start_mm, seg.end_mm, strict=True)))
-        cos_junction = -sum(a * b for a, b in zip(u0, u1, strict=True))
-        if cos_junction > 0.999999:
-            return 0.0
-        if cos_junction < -0.999999:
-            return math.inf
-        junction_unit = unit(tuple(b - a for a, b in zip(u0, u1, strict=True)))
-        accel = limit_by_axis_maximum(self.limits.accel_mm_s2, junction_unit)
-        sin_half = math.sqrt(0.5 * (1.0 - cos_junction))
         return math.sqrt(
-            max(0.0, accel * self.limits.junction_deviation_mm * sin_half / (1.0 - sin_half))
+            inc.junction_speed_sqr(
+                u0, u1, self.limits.accel_mm_s2, self.limits.junction_deviation_mm
+            )
         )
 
     def _speed_cap_mm_s(self, seg_index: int) -> float:

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import islice
 
+from smoothjog.core.increments import junction_speed_sqr
 from smoothjog.core.units import limit_by_axis_maximum, mm_min_to_mm_s, mm_s_to_mm_min
 
 # Speed: the comments marked "hot path" here and in firmware.py / rig.py are optimisations that
@@ -222,17 +223,9 @@ class Motion:
 
     def _junction_speed_sqr(self, unit_vec: tuple[float, ...]) -> float:
         """Grbl's junction-deviation limit between the previous block and this one (facts §4.3)."""
-        cos_junction = -sum(p * u for p, u in zip(self._prev_unit, unit_vec, strict=True))
-        if cos_junction > 0.999999:
-            return 0.0  # a full reversal: stop at the junction
-        if cos_junction < -0.999999:
-            return 1e38  # straight on: no junction limit
-        diff = tuple(u - p for u, p in zip(unit_vec, self._prev_unit, strict=True))
-        diff_len = math.sqrt(sum(c * c for c in diff))
-        junction_unit = tuple(c / diff_len for c in diff)
-        junction_accel = limit_by_axis_maximum(self._accel, junction_unit)
-        sin_half = math.sqrt(0.5 * (1.0 - cos_junction))
-        return max(0.0, junction_accel * self._junction_deviation_mm * sin_half / (1.0 - sin_half))
+        return junction_speed_sqr(
+            self._prev_unit, unit_vec, self._accel, self._junction_deviation_mm
+        )
 
     def _recalculate(self) -> None:
         """Reverse then forward pass: every plan ends at rest; no entry beyond what accel allows."""
