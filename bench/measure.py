@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
 import math
+import operator
 from collections.abc import Sequence
 
 from smoothjog.sim.motion import TraceSegment
 
+#: Normalised correlation below which a velocity is said not to follow a command at all.
+FOLLOW_MATCH = 0.5
 #: A segment slower than this is treated as standing still (mm/s): below one step per second.
 REST_MM_S = 1e-3
 
@@ -127,21 +131,35 @@ def lag_s(
     actual: Sequence[tuple[float, float]],
     max_lag_s: float = 0.5,
     step_s: float = 0.001,
+    min_match: float = FOLLOW_MATCH,
 ) -> float:
     """The shift of actual behind commanded (both sampled every step_s) that matches them best.
 
-    Infinite when the machine barely moved at all.
+    Infinite when the machine does not follow: it barely moved, the best shift is the end of the
+    search window (no optimum inside it), or even shifted the velocity matches the command with
+    a normalised correlation below min_match (it moved, but not like the stick).
     """
     cmd = [c for _, c in commanded]
     act = [a for _, a in actual]
     if max((abs(a) for a in act), default=0.0) < 0.05 * max((abs(c) for c in cmd), default=1.0):
         return math.inf  # the machine hardly moved: there is no lag to speak of, it never followed
-    best_lag, best_score = 0.0, -math.inf
+    # Running sums of squares, so each shift's normalisation costs O(1).
+    cmd_sq = list(itertools.accumulate((c * c for c in cmd), initial=0.0))
+    act_sq = list(itertools.accumulate((a * a for a in act), initial=0.0))
+    best_k, best_match = 0, -math.inf
+    last_k = 0
     for k in range(int(max_lag_s / step_s) + 1):
-        n = len(cmd) - k
+        n = min(len(cmd), len(act) - k)
         if n <= 10:
             break
-        score = sum(cmd[i] * act[i + k] for i in range(n)) / n
-        if score > best_score:
-            best_lag, best_score = k * step_s, score
-    return best_lag
+        last_k = k
+        # Normalised correlation over the overlap: the window shrinks as the shift grows, and
+        # a plain mean product would then favour shifts that merely cut off part of a period.
+        power = math.sqrt(cmd_sq[n] * (act_sq[k + n] - act_sq[k]))
+        dot = sum(map(operator.mul, cmd[:n], act[k : k + n]))
+        match = dot / power if power > 0 else 0.0
+        if match > best_match:
+            best_k, best_match = k, match
+    if best_k == last_k or best_match < min_match:
+        return math.inf
+    return best_k * step_s
