@@ -389,3 +389,132 @@ def homing_machine(tmp_path: Path) -> str:
     path = tmp_path / "homing.toml"
     path.write_text('start = "power-up"\n[settings]\n20 = 1\n22 = 1\n', encoding="utf-8")
     return str(path)
+
+
+def test_door_during_homing_is_alarm_7_then_a_reset(homing_machine: str) -> None:
+    host = Host(machine=homing_machine)
+    host.send("$H\n")
+    host.run(0.5)
+    host.send(b"\x84")
+    lines = host.until(lambda x: x.startswith("Grbl"), 3.0)
+    assert "ALARM:7" in lines
+    assert "ALARM:6" not in lines
+    assert lines.index("ALARM:7") < lines.index("Grbl 1.1h ['$' for help]")
+    assert host.state() == "Alarm"
+
+
+# ------------------------------------------------------------------ overrides (facts §4.2, §5.2)
+def _ov(host: Host) -> str | None:
+    """Ov of the next report that is not the boot report carrying WCO (which defers Ov)."""
+    report = host.status()
+    if field(report, "WCO") is not None and field(report, "Ov") is None:
+        report = host.status()
+    return field(report, "Ov")
+
+
+def _feed_of(report: str) -> float:
+    value = field(report, "FS")
+    assert value is not None, report
+    return float(value.split(",")[0])
+
+
+def test_feed_override_slows_g1_but_not_a_jog() -> None:
+    host = Host(machine="fast")
+    host.send(b"\x92" * 1)  # -10 %: 90 %
+    host.run(0.05)
+    for _ in range(4):  # one flag at a time, each serviced before the next: 50 %
+        host.send(b"\x92")
+        host.run(0.05)
+    assert _ov(host) == "50,100,100"
+    assert host.reply("G1X-100F3000") == "ok"
+    host.run(1.0)
+    assert _feed_of(host.status()) == pytest.approx(1500, abs=2)
+    host.wait_state("Idle")
+    assert host.reply("$J=G91X50F3000") == "ok"
+    host.run(0.5)
+    report = host.status()
+    assert report.startswith("<Jog")
+    assert _feed_of(report) == pytest.approx(3000, abs=2)
+
+
+def test_feed_override_mid_move_replans_the_queue() -> None:
+    host = Host(machine="fast")
+    assert host.reply("G1X-200F3000") == "ok"
+    host.run(0.5)
+    assert _feed_of(host.status()) == pytest.approx(3000, abs=2)
+    host.send(b"\x92")  # 90 %
+    host.run(0.5)
+    assert _feed_of(host.status()) == pytest.approx(2700, abs=2)
+    host.send(b"\x90")  # back to 100 %
+    host.run(0.5)
+    assert _feed_of(host.status()) == pytest.approx(3000, abs=2)
+
+
+def test_rapid_override_slows_g0() -> None:
+    host = Host(machine="fast")
+    host.send(b"\x97")  # 25 %
+    host.run(0.05)
+    assert _ov(host) == "100,25,100"
+    assert host.reply("G0X-200") == "ok"
+    host.run(1.0)
+    rapid = float(host.fw.settings[110])
+    assert _feed_of(host.status()) == pytest.approx(0.25 * rapid, abs=2)
+
+
+def test_override_flags_raised_twice_count_once() -> None:
+    host = Host()
+    # Five +10 % bytes land while the main loop parses the line before them: one flag.
+    host.send(b"G4P0\n" + b"\x91" * 5)
+    host.run(0.05)
+    assert _ov(host) == "110,100,100"
+
+
+def test_ov_is_forced_only_by_a_real_change() -> None:
+    host = Host()
+    host.status()
+    host.status()  # the boot reports with WCO and Ov are out of the way
+    host.send(b"\x90")  # feed override reset while already at 100 %: nothing changes
+    host.run(0.05)
+    assert field(host.status(), "Ov") is None
+    host.send(b"\x91")
+    host.run(0.05)
+    assert field(host.status(), "Ov") == "110,100,100"
+
+
+# ------------------------------------------------------------------ dwell (delay_sec)
+def test_a_status_request_during_a_dwell_waits_for_the_next_50_ms_step() -> None:
+    host = Host()
+    host.send("G4P1\n")
+    host.run(0.02)  # the dwell has started; its first step's checkpoint is behind us
+    asked = host.now_s
+    host.send(b"?")
+    host.until(lambda x: x.startswith("<"), 1.0)
+    answered = next(t for t, line in host.received if line.startswith("<"))
+    # Answered at the next step boundary, not after the byte and report times (about 6 ms).
+    assert 0.015 < answered - asked < 0.060
+    assert host.until(lambda x: x == "ok", 2.0)[-1] == "ok"
+
+
+def test_a_hold_during_a_dwell_suspends_it_until_resumed() -> None:
+    host = Host()
+    host.send("G4P0.5\n")
+    host.run(0.1)
+    host.send(b"!")
+    assert "ok" not in host.run(1.0)  # the dwell waits while held
+    assert host.state().startswith("Hold")
+    resumed = host.now_s
+    host.send(b"~")
+    host.until(lambda x: x == "ok", 2.0)
+    done = next(t for t, line in host.received if line == "ok" and t > resumed)
+    # Some 0.4 s of the 0.5 s dwell were left when it was suspended.
+    assert 0.3 < done - resumed < 0.5
+
+
+def test_on_off_settings_are_stored_as_bits() -> None:
+    host = Host()
+    assert host.reply("$13=5") == "ok"
+    assert "$13=1" in host.command("$$")
+    assert host.reply("$13=0") == "ok"
+    assert "$13=0" in host.command("$$")
+    assert host.reply("$10=3") == "ok"  # a mask keeps its value
+    assert "$10=3" in host.command("$$")

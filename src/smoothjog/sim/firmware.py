@@ -91,6 +91,7 @@ ALARM_HARD_LIMIT = 1
 ALARM_SOFT_LIMIT = 2
 ALARM_ABORT_CYCLE = 3
 ALARM_HOMING_FAIL_RESET = 6
+ALARM_HOMING_FAIL_DOOR = 7
 
 # Status codes the protocol layer itself sends (facts §5.7).
 _E_BAD_NUMBER = 2
@@ -116,24 +117,36 @@ _EPS_S = 1e-12
 
 HELP_LINE = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
 
-_OVERRIDE_STEPS: dict[Realtime, tuple[int, int]] = {
-    # (index into overrides: 0 feed, 1 rapid, 2 spindle; change, where 0 = back to 100 %)
-    Realtime.FEED_OVR_RESET: (0, 0),
-    Realtime.FEED_OVR_COARSE_PLUS: (0, 10),
-    Realtime.FEED_OVR_COARSE_MINUS: (0, -10),
-    Realtime.FEED_OVR_FINE_PLUS: (0, 1),
-    Realtime.FEED_OVR_FINE_MINUS: (0, -1),
-    Realtime.SPINDLE_OVR_RESET: (2, 0),
-    Realtime.SPINDLE_OVR_COARSE_PLUS: (2, 10),
-    Realtime.SPINDLE_OVR_COARSE_MINUS: (2, -10),
-    Realtime.SPINDLE_OVR_FINE_PLUS: (2, 1),
-    Realtime.SPINDLE_OVR_FINE_MINUS: (2, -1),
-}
-_RAPID_OVERRIDES: dict[Realtime, int] = {
-    Realtime.RAPID_OVR_RESET: 100,
-    Realtime.RAPID_OVR_MEDIUM: 50,
-    Realtime.RAPID_OVR_LOW: 25,
-}
+#: Feed and spindle override flags in the order protocol_exec_rt_system applies them: a reset to
+#: 100 %, then each step; the sum is clamped to 10-200 % once, after all of them (facts §5.2).
+_FEED_STEPS: tuple[tuple[Realtime, int | None], ...] = (
+    (Realtime.FEED_OVR_RESET, None),
+    (Realtime.FEED_OVR_COARSE_PLUS, 10),
+    (Realtime.FEED_OVR_COARSE_MINUS, -10),
+    (Realtime.FEED_OVR_FINE_PLUS, 1),
+    (Realtime.FEED_OVR_FINE_MINUS, -1),
+)
+_SPINDLE_STEPS: tuple[tuple[Realtime, int | None], ...] = (
+    (Realtime.SPINDLE_OVR_RESET, None),
+    (Realtime.SPINDLE_OVR_COARSE_PLUS, 10),
+    (Realtime.SPINDLE_OVR_COARSE_MINUS, -10),
+    (Realtime.SPINDLE_OVR_FINE_PLUS, 1),
+    (Realtime.SPINDLE_OVR_FINE_MINUS, -1),
+)
+#: Rapid override flags in the order applied (the last one set wins).
+_RAPID_STEPS: tuple[tuple[Realtime, int], ...] = (
+    (Realtime.RAPID_OVR_RESET, 100),
+    (Realtime.RAPID_OVR_MEDIUM, 50),
+    (Realtime.RAPID_OVR_LOW, 25),
+)
+
+
+def _stepped(pct: int, flags: set[Realtime], steps: tuple[tuple[Realtime, int | None], ...]) -> int:
+    """One override after the flags raised since the main loop last looked."""
+    for flag, change in steps:
+        if flag in flags:
+            pct = 100 if change is None else pct + change
+    return min(200, max(10, pct))
 
 
 # ------------------------------------------------------------------------------------------
@@ -174,10 +187,14 @@ class _Sync:
 
 @dataclass
 class _Dwell:
-    """delay_sec in dwell mode: 50 ms steps with a checkpoint each."""
+    """delay_sec in dwell mode: 50 ms steps, each starting with a checkpoint."""
 
     seconds: float
     end_s: float | None = None
+    #: The next step's checkpoint (None once the last step is under way).
+    check_s: float | None = None
+    #: When a hold or door suspended the dwell inside a checkpoint (the steps wait meanwhile).
+    paused_s: float | None = None
 
 
 @dataclass
@@ -283,7 +300,9 @@ class GrblFirmware:
         self._line_buf = bytearray()
         self._held_line: bytes | None = None
         self._overrides = _Overrides()
-        self._pending_overrides: list[Realtime] = []
+        # Override requests are flags, as in the firmware: one raised twice before the main loop
+        # services it counts once (facts §5.2).
+        self._pending_overrides: set[Realtime] = set()
         self._accessories_off = False  # spindle/coolant cut by a door or sleep
         self._restore_until_s: float | None = None
         self._sleep_reported = False
@@ -544,7 +563,7 @@ class GrblFirmware:
             if self.state == JOG:
                 self._rt |= EXEC_MOTION_CANCEL
         elif kind is not Realtime.DISCARD:
-            self._pending_overrides.append(kind)
+            self._pending_overrides.add(kind)
 
     def _mc_reset(self, now_s: float) -> None:
         """mc_reset, run inside the ISR: kill motion now; ALARM:3 (6 when homing) if moving."""
@@ -572,7 +591,7 @@ class GrblFirmware:
             if isinstance(head, _Busy):
                 due = head.until_s
             elif isinstance(head, _Dwell) and not self.suspend:
-                due = head.end_s
+                due = head.check_s if head.check_s is not None else head.end_s
             if due is not None and (best is None or due < best):
                 best = due
         restore = self._restore_until_s
@@ -692,6 +711,8 @@ class GrblFirmware:
                 return True
             if isinstance(head, _Home):
                 return self._homing_step(head, now_s)
+        if isinstance(head, _Dwell):
+            return self._dwell_step(head, now_s)
         # Everything else waits inside protocol_execute_realtime: a checkpoint first.
         changed = self._checkpoint(now_s)
         if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
@@ -710,17 +731,46 @@ class GrblFirmware:
                 self._steps.popleft()
                 return True
             return self._auto_cycle_start() or changed
-        if isinstance(head, _Dwell):
-            if head.end_s is None:
-                n_steps = math.ceil(head.seconds / DWELL_STEP_S - 1e-9)
-                head.end_s = now_s + max(n_steps, 0) * DWELL_STEP_S
-            if now_s + _EPS_S >= head.end_s:
-                self._steps.popleft()
-                return True
-            return changed
         if isinstance(head, _SoftLimit):
             return self._soft_limit_step(head, now_s) or changed
         raise AssertionError(f"unknown step {head!r}")
+
+    def _dwell_step(self, head: _Dwell, now_s: float) -> bool:
+        """delay_sec: ceil(P / 50 ms) steps, a checkpoint at the start of each, then a sleep.
+
+        Realtime bytes that arrive during a step wait for the next step's checkpoint (a `?`
+        can take up to 50 ms to be answered); `G4P0` has no step and so no checkpoint. A hold
+        or door raised at a checkpoint suspends the dwell there until it is resumed.
+        """
+        if head.end_s is None:
+            n_steps = max(math.ceil(head.seconds / DWELL_STEP_S - 1e-9), 0)
+            head.end_s = now_s + n_steps * DWELL_STEP_S
+            head.check_s = now_s if n_steps else None
+        if head.paused_s is None and (head.check_s is None or now_s + _EPS_S < head.check_s):
+            if head.check_s is None and now_s + _EPS_S >= head.end_s:
+                self._steps.popleft()
+                return True
+            return False  # asleep inside a step
+        changed = self._checkpoint(now_s)
+        if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
+            return True
+        if self._locked or not self._steps or self._steps[0] is not head:
+            return True  # an abort or alarm changed the picture
+        if self.suspend:
+            if head.paused_s is None:
+                head.paused_s = now_s
+            return changed
+        if head.paused_s is not None:
+            # Resumed: the steps left run from here, as the sleep resumes after the suspend loop.
+            shift = now_s - head.paused_s
+            head.paused_s = None
+            head.end_s += shift
+            if head.check_s is not None:
+                head.check_s += shift
+        if head.check_s is not None and now_s + _EPS_S >= head.check_s:
+            nxt = head.check_s + DWELL_STEP_S
+            head.check_s = nxt if nxt < head.end_s - _EPS_S else None
+        return True
 
     # ------------------------------------------------------------------ line reading
     def _poll(self, now_s: float) -> bool:
@@ -800,7 +850,7 @@ class GrblFirmware:
             self._cycle_stop(now_s)
             changed = True
         if self._pending_overrides:
-            self._apply_overrides()
+            self._apply_overrides(now_s)
             changed = True
         return changed
 
@@ -947,21 +997,36 @@ class GrblFirmware:
                 changed = True
         return changed
 
-    def _apply_overrides(self) -> None:
-        """Feed/rapid/spindle overrides and accessory toggles (they change Ov:, not jogs)."""
+    def _apply_overrides(self, now_s: float) -> None:
+        """Service the override and accessory flags raised since the last checkpoint.
+
+        Feed and rapid changes re-plan the queued blocks (jogs keep their speed, facts §4.2);
+        Ov: is forced into the next report only when a value or the coolant really changed.
+        """
+        flags = self._pending_overrides
         pct = self._overrides.pct
-        for kind in self._pending_overrides:
-            if kind in _OVERRIDE_STEPS:
-                index, change = _OVERRIDE_STEPS[kind]
-                pct[index] = 100 if change == 0 else min(200, max(10, pct[index] + change))
-            elif kind in _RAPID_OVERRIDES:
-                pct[1] = _RAPID_OVERRIDES[kind]
-            elif kind is Realtime.FLOOD_TOGGLE and self.state in (IDLE, CYCLE, HOLD, JOG):
-                self.parser = replace(self.parser, coolant_flood=not self.parser.coolant_flood)
-            # Mist needs ENABLE_M7 (off by default) and the spindle-stop toggle needs a
-            # running spindle in Hold; neither changes what a jog host sees, so both are ignored.
-        self._pending_overrides.clear()
-        self.reporter.force_ovr()
+        feed = _stepped(pct[0], flags, _FEED_STEPS)
+        rapid = pct[1]
+        for flag, value in _RAPID_STEPS:
+            if flag in flags:
+                rapid = value
+        spindle = _stepped(pct[2], flags, _SPINDLE_STEPS)
+        changed = False
+        if (feed, rapid) != (pct[0], pct[1]):
+            pct[0], pct[1] = feed, rapid
+            self.motion.set_overrides(feed, rapid, now_s)
+            changed = True
+        if spindle != pct[2]:
+            pct[2] = spindle
+            changed = True
+        if Realtime.FLOOD_TOGGLE in flags and self.state in (IDLE, CYCLE, HOLD, JOG):
+            self.parser = replace(self.parser, coolant_flood=not self.parser.coolant_flood)
+            changed = True
+        # Mist needs ENABLE_M7 (off by default) and the spindle-stop toggle needs a running
+        # spindle in Hold; neither changes what a jog host sees, so both are ignored.
+        flags.clear()
+        if changed:
+            self.reporter.force_ovr()
 
     # ------------------------------------------------------------------ reports
     def _substate(self) -> int | None:
@@ -1108,7 +1173,9 @@ class GrblFirmware:
             return True
         if self.motion.planner_free() <= 0:
             return self._auto_cycle_start()
-        self.motion.plan_line(step.target_mm, step.feed_mm_min, rapid=step.rapid)
+        self.motion.plan_line(
+            step.target_mm, step.feed_mm_min, rapid=step.rapid, feed_override=not step.jog
+        )
         self._steps.popleft()
         if step.jog:
             if self.state == IDLE and not self.motion.planner_empty():
@@ -1348,14 +1415,19 @@ class GrblFirmware:
                 seek = list(pos)
                 for i in axes:
                     seek[i] = switch[i]
-                self.motion.plan_line(seek, self.settings[25])
+                self.motion.plan_line(seek, self.settings[25], feed_override=False)
                 pull = list(seek)
                 for i in axes:
                     pull[i] = final[i]
-                self.motion.plan_line(pull, self.settings[24])
+                self.motion.plan_line(pull, self.settings[24], feed_override=False)
                 pos = pull
             self.motion.start_cycle(now_s)
             return True
+        if self._rt & EXEC_SAFETY_DOOR and not self._rt & EXEC_RESET:
+            # limits_go_home watches the door as well as reset: ALARM:7, then the reset that
+            # mc_reset starts (the door flag dies with the re-initialisation; facts §5.6).
+            self._mc_reset(now_s)
+            self._rt_alarm = ALARM_HOMING_FAIL_DOOR
         if self._rt & EXEC_RESET:
             self._checkpoint(now_s)
             return True

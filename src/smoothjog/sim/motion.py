@@ -84,6 +84,14 @@ class _Block:
     accel_mm_s2: float
     max_entry_sqr: float
     entry_sqr: float = 0.0
+    #: The rate the line asked for (mm/s), the axes' rapid rate along it, whether it is a rapid,
+    #: whether feed override applies (not to jogs or homing), and its junction limit, so that an
+    #: override change can recompute nominal_mm_s and max_entry_sqr (facts §4.2, §4.3).
+    programmed_mm_s: float = 0.0
+    rapid_mm_s: float = 0.0
+    rapid: bool = False
+    feed_override: bool = True
+    junction_sqr: float = 0.0
     #: target_steps - start_steps per axis, kept so step counts need no subtraction each time.
     delta_steps: tuple[int, ...] = ()
 
@@ -133,6 +141,9 @@ class Motion:
         self._planner_steps: tuple[int, ...] = (0,) * n
         self._prev_unit: tuple[float, ...] = (0.0,) * n
         self._prev_nominal_mm_s = 0.0
+        # Feed and rapid override as fractions (facts §5.2); jog blocks ignore both.
+        self._feed_ovr = 1.0
+        self._rapid_ovr = 1.0
         self._blocks: deque[_Block] = deque()
         self._segments: deque[_Segment] = deque()
         # Step preparer state: how far into the tail block it has cut, and its speed there.
@@ -171,9 +182,18 @@ class Motion:
         return not self._blocks
 
     def plan_line(
-        self, target_mm: Sequence[float], feed_mm_min: float, *, rapid: bool = False
+        self,
+        target_mm: Sequence[float],
+        feed_mm_min: float,
+        *,
+        rapid: bool = False,
+        feed_override: bool = True,
     ) -> bool:
-        """Queue one linear block to target_mm (machine mm); False if it rounds to no step."""
+        """Queue one linear block to target_mm (machine mm); False if it rounds to no step.
+
+        feed_override=False for jogs and homing moves: feed override leaves them alone, and a
+        jog is not a rapid, so rapid override does not touch it either (facts §4.2).
+        """
         if len(self._blocks) >= self.planner_blocks:
             raise RuntimeError("plan_line called with the planner full")
         target_steps = tuple(
@@ -189,12 +209,8 @@ class Motion:
         unit_vec = tuple(d / length_mm for d in delta_mm)
         accel = limit_by_axis_maximum(self._accel, unit_vec)
         rapid_mm_s = limit_by_axis_maximum(self._max_rate_mm_s, unit_vec)
-        nominal = rapid_mm_s if rapid else min(mm_min_to_mm_s(feed_mm_min), rapid_mm_s)
-        nominal = max(nominal, mm_min_to_mm_s(self.min_feed_mm_min))
-
         # facts §4.3: a block added to an empty planner starts from rest.
-        max_junction_sqr = self._junction_speed_sqr(unit_vec) if self._blocks else 0.0
-        max_entry_sqr = min(max_junction_sqr, nominal * nominal, self._prev_nominal_mm_s**2)
+        junction_sqr = self._junction_speed_sqr(unit_vec) if self._blocks else 0.0
         start_mm = tuple(
             s / spm for s, spm in zip(self._planner_steps, self._steps_per_mm, strict=True)
         )
@@ -204,10 +220,18 @@ class Motion:
             start_mm=start_mm,
             unit_vec=unit_vec,
             length_mm=length_mm,
-            nominal_mm_s=nominal,
+            nominal_mm_s=0.0,
             accel_mm_s2=accel,
-            max_entry_sqr=max_entry_sqr,
+            max_entry_sqr=0.0,
+            programmed_mm_s=rapid_mm_s if rapid else mm_min_to_mm_s(feed_mm_min),
+            rapid_mm_s=rapid_mm_s,
+            rapid=rapid,
+            feed_override=feed_override and not rapid,
+            junction_sqr=junction_sqr,
         )
+        nominal = self._nominal_mm_s(block)
+        block.nominal_mm_s = nominal
+        block.max_entry_sqr = min(junction_sqr, nominal * nominal, self._prev_nominal_mm_s**2)
         was_empty = not self._blocks
         self._blocks.append(block)
         self._planner_steps = target_steps
@@ -220,6 +244,36 @@ class Motion:
         if self._running and not self._hold:
             self._fill_segments()
         return True
+
+    def _nominal_mm_s(self, block: _Block) -> float:
+        """plan_compute_profile_nominal_speed: the programmed rate under the overrides."""
+        if block.rapid:
+            nominal = block.rapid_mm_s * self._rapid_ovr
+        else:
+            nominal = block.programmed_mm_s
+            if block.feed_override:
+                nominal *= self._feed_ovr
+            nominal = min(nominal, block.rapid_mm_s)
+        return max(nominal, mm_min_to_mm_s(self.min_feed_mm_min))
+
+    def set_overrides(self, feed_pct: int, rapid_pct: int, now_s: float) -> None:
+        """A feed or rapid override changed: re-plan every queued block (facts §4.3).
+
+        As plan_update_velocity_profile_parameters plus plan_cycle_reinitialize: new nominal
+        speeds and entry limits for every block, then a re-plan from where the step preparer
+        has got to. Segments already prepared run as they are.
+        """
+        self.advance(now_s)
+        self._feed_ovr = feed_pct / 100.0
+        self._rapid_ovr = rapid_pct / 100.0
+        prev_nominal = math.inf  # the tail block's entry is not limited by a previous block
+        for b in self._blocks:
+            b.nominal_mm_s = self._nominal_mm_s(b)
+            b.max_entry_sqr = min(b.junction_sqr, b.nominal_mm_s**2, prev_nominal**2)
+            prev_nominal = b.nominal_mm_s
+        if self._blocks:
+            self._prev_nominal_mm_s = prev_nominal
+        self._recalculate()
 
     def _junction_speed_sqr(self, unit_vec: tuple[float, ...]) -> float:
         """Grbl's junction-deviation limit between the previous block and this one (facts §4.3)."""

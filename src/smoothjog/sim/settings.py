@@ -98,6 +98,12 @@ def format_grbl_float(value: float, decimals: int) -> str:
     return f"-{text}" if negative and value != 0.0 else text
 
 
+#: On/off settings: Grbl keeps them as bits of its flags byte, so any non-zero value is stored
+#: and printed as 1 (`settings.c`: step-enable, limit and probe invert, report inches, soft and
+#: hard limits, homing, laser mode).
+FLAG_SETTINGS = frozenset({4, 5, 6, 13, 20, 21, 22, 32})
+
+
 class GrblSettings:
     """The `$` settings of one simulated controller, with Grbl's store rules."""
 
@@ -157,6 +163,8 @@ class GrblSettings:
             return STATUS_STEP_PULSE_MIN
         if number == 20 and int_value and not self.int_value(22):
             return STATUS_SOFT_LIMIT_NEEDS_HOMING
+        if number in FLAG_SETTINGS:
+            int_value = 1 if int_value else 0
         self._values[number] = float(int_value)
         if number == 22 and not int_value:
             # Turning homing off also turns soft limits off (facts §2).
