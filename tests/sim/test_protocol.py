@@ -518,3 +518,21 @@ def test_on_off_settings_are_stored_as_bits() -> None:
     assert "$13=0" in host.command("$$")
     assert host.reply("$10=3") == "ok"  # a mask keeps its value
     assert "$10=3" in host.command("$$")
+
+
+def test_long_output_stalls_the_main_loop_until_the_tx_ring_has_room() -> None:
+    host = Host()
+    t0 = host.now_s
+    host.send("$J=G91X-1F300\n")
+    host.run(2.0)  # the whole jog (10 mm/s² here), and the $1 delay after it
+    alone = host.fw.trace[0].t0_s - t0
+    t1 = host.now_s
+    host.send("$$\n$J=G91X-1F300\n")
+    lines = host.run(0.5)
+    started = next(seg.t0_s for seg in host.fw.trace if seg.t0_s >= t1) - t1
+    sent = sum(len(line) + 2 for line in lines[: lines.index("ok") + 1])
+    byte_s = 10 / 115200
+    # The jog line is read only once all but 104 bytes of the `$$` text are on their way.
+    assert sent > 300
+    assert started >= (sent - 104) * byte_s
+    assert alone < 0.006  # a short reply never fills the ring

@@ -307,6 +307,10 @@ class GrblFirmware:
         self._restore_until_s: float | None = None
         self._sleep_reported = False
         self._output: list[tuple[float, bytes]] = []
+        #: Time one output byte takes on the wire (115200 8N1 unless the rig says otherwise), and
+        #: when the UART will have sent everything queued so far.
+        self.tx_byte_s = 10 / 115200
+        self._tx_done_s = 0.0
         #: A run of plain line bytes (line bytes other than a line end), for receive's fast path.
         plain = b"".join(
             re.escape(bytes((b,))) for b in range(256) if self.is_line_byte(b) and b not in b"\n\r"
@@ -1073,8 +1077,18 @@ class GrblFirmware:
         )
 
     def _emit(self, now_s: float, text: str) -> None:
-        """Queue one line to the host."""
-        self._output.append((now_s, text.encode("ascii") + b"\r\n"))
+        """Queue one line to the host; if the TX ring cannot take it all, the main loop waits.
+
+        serial_write busy-waits for room (facts §5.1): the main loop is free again once the
+        last byte is in the ring, i.e. when no more than tx_size bytes are left to send.
+        """
+        data = text.encode("ascii") + b"\r\n"
+        self._output.append((now_s, data))
+        byte_s = self.tx_byte_s
+        self._tx_done_s = max(self._tx_done_s, now_s) + len(data) * byte_s
+        free_at = self._tx_done_s - self.profile.tx_size * byte_s
+        if free_at > self._frozen_until_s and free_at > now_s + _EPS_S:
+            self._frozen_until_s = free_at
 
     # ------------------------------------------------------------------ line execution
     def _execute_line(self, step: _Execute, now_s: float) -> list[_Step]:

@@ -54,6 +54,8 @@ class FirmwareProfile:
     extra_settings: dict[int, float] = field(default_factory=dict)
     #: The blocking pause after an ALARM message (facts §5.3).
     alarm_pause_s: float = 0.5
+    #: The TX ring: when output does not fit, the main loop waits for it to drain (facts §5.1).
+    tx_size: int = 104
 
 
 # Timing parameters (assumptions where the facts are silent):
@@ -62,6 +64,9 @@ class FirmwareProfile:
 #   the planner's reverse/forward pass over up to 15 blocks about 1 ms, so 1.5 ms is used. The
 #   32-bit controllers (grblHAL, FluidNC) have an FPU and 10x the clock: 0.3 ms.
 # - alarm_pause_s: the 500 ms delay after an ALARM message (facts §5.3).
+# - tx_size: Grbl 1.1h's 104-byte TX ring (facts §5.1). The facts give none for grblHAL and
+#   FluidNC; both queue output in buffers of a kilobyte or more, so 1024 is assumed (in effect:
+#   their main loop never waits for the wire).
 GRBL = FirmwareProfile(
     name="grbl",
     banner="Grbl 1.1h ['$' for help]",
@@ -95,6 +100,7 @@ GRBLHAL = FirmwareProfile(
     realtime={**GRBL_REALTIME, **GRBLHAL_EXTRA_REALTIME},
     line_time_s=0.0003,
     extra_settings={40: 0},
+    tx_size=1024,
 )
 
 # FluidNC: 16 planner blocks with Bf = blocks - 1, i.e. 15 usable and reported (facts §7).
@@ -112,6 +118,7 @@ FLUIDNC = FirmwareProfile(
     jog_clip=JogClip.CLIP_PER_AXIS,
     realtime=dict(GRBL_REALTIME),
     line_time_s=0.0003,
+    tx_size=1024,
 )
 
 FIRMWARE_PROFILES: dict[str, FirmwareProfile] = {p.name: p for p in (GRBL, GRBLHAL, FLUIDNC)}

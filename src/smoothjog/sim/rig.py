@@ -124,6 +124,8 @@ class SimRig:
         self.clock_ratio = clock_ratio
         self.firmware = firmware if firmware is not None else GrblFirmware()
         self.link = link if link is not None else LinkModel()
+        # The controller's UART runs at the wire's rate (in the controller's own clock).
+        self.firmware.tx_byte_s = self.link.byte_time_s * clock_ratio
         rng = random.Random(self.link.seed)
         self._up = _Direction(self.link, rng)
         self._down = _Direction(self.link, rng)
