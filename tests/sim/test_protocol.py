@@ -536,3 +536,18 @@ def test_long_output_stalls_the_main_loop_until_the_tx_ring_has_room() -> None:
     assert sent > 300
     assert started >= (sent - 104) * byte_s
     assert alone < 0.006  # a short reply never fills the ring
+
+
+def test_reset_while_jogging_waits_the_step_idle_delay_before_alarm_and_banner() -> None:
+    host = Host(machine="hobby-router")
+    assert host.reply("$J=G91X-50F3000") == "ok"
+    host.run(0.3)
+    t = host.now_s
+    host.send(b"\x18")
+    host.run(1.0)
+    seen = {line: when - t for when, line in host.received if when >= t}
+    lock_s = host.fw.settings[1] / 1000  # $1 = 25 ms
+    # mc_reset's st_go_idle (in the ISR) holds ALARM:3 back by $1 ms; after the 500 ms pause the
+    # re-initialisation's st_reset waits $1 ms more before the banner.
+    assert seen["ALARM:3"] == pytest.approx(lock_s, abs=0.003)
+    assert seen["Grbl 1.1h ['$' for help]"] == pytest.approx(lock_s + 0.5 + lock_s, abs=0.005)

@@ -481,9 +481,7 @@ class GrblFirmware:
         elif self.settings.int_value(22):
             self.state = ALARM
         self.parser = self.parser.with_position(self.mpos_mm())
-        self._emit(now_s, "")
-        self._emit(now_s, self.profile.banner)
-        self._main_loop_start(now_s)
+        self._reinit_delay(now_s)
 
     def _main_loop_start(self, now_s: float) -> None:
         """Start of protocol_main_loop: the unlock message in Alarm, else the startup lines."""
@@ -519,6 +517,24 @@ class GrblFirmware:
         self._held_line = None
         self.motion.kill()
         self.parser = self.parser.after_reset().with_position(self.mpos_mm())
+        self._reinit_delay(now_s)
+
+    def _reinit_delay(self, now_s: float) -> None:
+        """st_reset's st_go_idle holds the main loop for $1 ms before the banner.
+
+        Assumption (code, not the facts): main() re-initialises the stepper subsystem on every
+        power-up and reset, and st_go_idle waits the step-idle delay unless $1=255 (or the
+        state before was Sleep), with no alarm pending any more at that point.
+        """
+        lock_ms = self.settings.int_value(1)
+        if (lock_ms != 255 or self.state == SLEEP) and lock_ms > 0:
+            self._freeze(now_s, lock_ms / 1000.0)
+            self._after_freeze = self._banner
+        else:
+            self._banner(now_s)
+
+    def _banner(self, now_s: float) -> None:
+        """report_init_message, then the main loop starts."""
         self._emit(now_s, "")
         self._emit(now_s, self.profile.banner)
         self._main_loop_start(now_s)
@@ -579,6 +595,9 @@ class GrblFirmware:
             self._rt_alarm = ALARM_HOMING_FAIL_RESET if self.state == HOMING else ALARM_ABORT_CYCLE
             self._motion_to(now_s)
             self.motion.kill()
+            # st_go_idle, still inside the ISR: the step-idle delay (always, with an alarm set;
+            # not while homing), so ALARM:3 comes $1 ms later (code, not the facts).
+            self._step_idle_delay(now_s)
 
     # ------------------------------------------------------------------ time stepping
     def _next_internal_s(self) -> float | None:
