@@ -551,3 +551,15 @@ def test_reset_while_jogging_waits_the_step_idle_delay_before_alarm_and_banner()
     # re-initialisation's st_reset waits $1 ms more before the banner.
     assert seen["ALARM:3"] == pytest.approx(lock_s, abs=0.003)
     assert seen["Grbl 1.1h ['$' for help]"] == pytest.approx(lock_s + 0.5 + lock_s, abs=0.005)
+
+
+def test_a_reset_puts_the_overrides_back_to_100_percent() -> None:
+    host = Host(machine="fast")
+    host.send(b"G4P0\n" + b"\x92")  # 90 %
+    host.run(0.05)
+    assert _ov(host) == "90,100,100"
+    host.send(b"\x18")
+    host.until(lambda x: x.startswith("Grbl"), 2.0)
+    assert host.reply("G1X-200F3000") == "ok"
+    host.run(1.0)
+    assert _feed_of(host.status()) == pytest.approx(3000, abs=2)

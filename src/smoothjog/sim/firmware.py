@@ -516,6 +516,7 @@ class GrblFirmware:
         self._line_buf.clear()
         self._held_line = None
         self.motion.kill()
+        self.motion.set_overrides(100, 100, now_s)  # sys.f_override and r_override back to 100
         self.parser = self.parser.after_reset().with_position(self.mpos_mm())
         self._reinit_delay(now_s)
 
