@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -186,3 +187,26 @@ def test_resume_after_run_hold_finishes_the_block() -> None:
     m.resume(t + 1.0)
     run_to_stop(m)
     assert m.position_mm() == (-100.0, 0.0, 0.0)
+
+
+def test_an_override_cut_near_a_block_end_never_brakes_harder_than_the_axis_allows() -> None:
+    from tests.sim.rigtools import Host
+
+    host = Host(machine="fast")
+    fw = host.fw
+    host.send("G0X-100\nG0X-200\n")
+    while fw.mpos_mm()[0] > -80:
+        host.run(0.002)
+    host.send(b"\x97")  # rapid override 25 % close to the end of the first block
+    host.run(3.0)
+    accel = fw.settings[120]
+    speeds = [
+        (abs(s.end_mm[0] - s.start_mm[0]) / (s.t1_s - s.t0_s), s.t1_s - s.t0_s)
+        for s in fw.trace
+        if s.t1_s - s.t0_s > 0.005
+    ]
+    worst = max(
+        (v0 - v1) / ((dt0 + dt1) / 2) for (v0, dt0), (v1, dt1) in itertools.pairwise(speeds)
+    )
+    assert worst <= accel * 1.02
+    assert fw.mpos_mm()[0] == pytest.approx(-200.0, abs=0.01)  # and it still ends on target

@@ -563,3 +563,28 @@ def test_a_reset_puts_the_overrides_back_to_100_percent() -> None:
     assert host.reply("G1X-200F3000") == "ok"
     host.run(1.0)
     assert _feed_of(host.status()) == pytest.approx(3000, abs=2)
+
+
+def test_a_reset_during_a_dwell_aborts_after_the_current_50_ms_step() -> None:
+    host = Host()
+    host.send("G4P1\n")
+    host.run(0.02)
+    t = host.now_s
+    host.send(b"\x18")
+    host.until(lambda x: x.startswith("Grbl"), 1.0)
+    seen = {line: when - t for when, line in host.received if when >= t}
+    # The reset is seen at the next step's checkpoint (about 30 ms on), which only marks the
+    # abort; that step's 50 ms sleep runs, then the dwell returns its ok and Grbl restarts.
+    assert 0.070 < seen["ok"] < 0.090
+    assert seen["Grbl 1.1h ['$' for help]"] > seen["ok"]
+
+
+def test_feed_override_wraps_as_a_byte_before_the_clamp() -> None:
+    host = Host()
+    for _ in range(9):  # 100 % -> 10 %, one flag at a time
+        host.send(b"\x92")
+        host.run(0.01)
+    assert _ov(host) == "10,100,100"
+    host.send(b"G4P0\n" + b"\x92\x94")  # -10 and -1 in one pass: 10 - 11 wraps to 255 -> 200 %
+    host.run(0.05)
+    assert _ov(host) == "200,100,100"

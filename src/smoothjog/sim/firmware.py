@@ -142,10 +142,14 @@ _RAPID_STEPS: tuple[tuple[Realtime, int], ...] = (
 
 
 def _stepped(pct: int, flags: set[Realtime], steps: tuple[tuple[Realtime, int | None], ...]) -> int:
-    """One override after the flags raised since the main loop last looked."""
+    """One override after the flags raised since the main loop last looked.
+
+    The sum is a uint8_t in protocol.c, so it wraps before the clamp: at 10 %, -10 and -1
+    together give 255 and so 200 %, as on the chip.
+    """
     for flag, change in steps:
         if flag in flags:
-            pct = 100 if change is None else pct + change
+            pct = 100 if change is None else (pct + change) & 0xFF
     return min(200, max(10, pct))
 
 
@@ -195,6 +199,8 @@ class _Dwell:
     check_s: float | None = None
     #: When a hold or door suspended the dwell inside a checkpoint (the steps wait meanwhile).
     paused_s: float | None = None
+    #: A reset was seen at a checkpoint: the abort happens when this step's sleep ends.
+    aborting_s: float | None = None
 
 
 @dataclass
@@ -614,6 +620,8 @@ class GrblFirmware:
             due: float | None = None
             if isinstance(head, _Busy):
                 due = head.until_s
+            elif isinstance(head, _Dwell) and head.aborting_s is not None:
+                due = head.aborting_s
             elif isinstance(head, _Dwell) and not self.suspend:
                 due = head.check_s if head.check_s is not None else head.end_s
             if due is not None and (best is None or due < best):
@@ -770,11 +778,20 @@ class GrblFirmware:
             n_steps = max(math.ceil(head.seconds / DWELL_STEP_S - 1e-9), 0)
             head.end_s = now_s + n_steps * DWELL_STEP_S
             head.check_s = now_s if n_steps else None
+        if head.aborting_s is not None:
+            # A reset seen at a checkpoint only sets sys.abort: the step's 50 ms sleep still
+            # runs, and delay_sec returns at the top of its next pass.
+            if now_s + _EPS_S < head.aborting_s:
+                return False
+            return self._checkpoint(now_s) or True
         if head.paused_s is None and (head.check_s is None or now_s + _EPS_S < head.check_s):
             if head.check_s is None and now_s + _EPS_S >= head.end_s:
                 self._steps.popleft()
                 return True
             return False  # asleep inside a step
+        if self._rt & EXEC_RESET and not self._rt_alarm:
+            head.aborting_s = now_s + DWELL_STEP_S
+            return False
         changed = self._checkpoint(now_s)
         if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
             return True
@@ -836,7 +853,7 @@ class GrblFirmware:
         # Hot path (every main-loop wait): with no flag raised protocol_exec_rt_system does nothing.
         raised = self._rt or self._rt_alarm or self._pending_overrides
         changed = self._rt_system(now_s) if raised else False
-        if self._locked or self._after_freeze is not None or self._frozen_until_s > now_s:
+        if self._locked or self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
             return True
         if self.suspend:
             changed = self._suspend_pass(now_s) or changed

@@ -558,6 +558,12 @@ def _run_profile(
         if rem <= decel_dist + 1e-9 * (1.0 + decel_dist):
             # Decelerate so as to arrive at the block end exactly at the exit speed.
             a_eff = max((v * v - exit_mm_s * exit_mm_s) / (2.0 * rem), 1e-12)
+            if a_eff > a * (1.0 + 1e-6):
+                # Only after an override cut (the planner never asks for more): Grbl's
+                # deceleration override decelerates at the block's own rate and leaves the
+                # block faster than planned; the next block starts from that speed.
+                exit_mm_s = math.sqrt(max(v * v - 2.0 * a * rem, 0.0))
+                a_eff = a
             t_end = (v - exit_mm_s) / a_eff if v > exit_mm_s else rem / max(v, 1e-12)
             t = min(t_left, t_end)
             if t == t_end:
