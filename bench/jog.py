@@ -146,7 +146,10 @@ def table(results: dict[str, dict[str, dict[str, float]]], ph: sc.Physics) -> li
         if key == "S6":
             dv_a = 0.7 * ph.stop_s
             return f"{_fmt(r['time_s'])} s ({_fmt(r['time_s'] / dv_a)}x Δv/a)"
-        return "never follows" if math.isinf(r["lag_s"]) else f"{1000 * r['lag_s']:.0f} ms"
+        match = f"(match {r['match']:.2f})"
+        if math.isinf(r["lag_s"]):
+            return f"never follows {match}"
+        return f"{1000 * r['lag_s']:.0f} ms {match}"
 
     labels = {
         "S1": "S1 release at full speed: distance / time to standstill",
@@ -155,7 +158,8 @@ def table(results: dict[str, dict[str, dict[str, float]]], ph: sc.Physics) -> li
         "S4": "S4 client dies mid-jog: distance coasted",
         "S5": "S5 release at 10 % speed: distance / time",
         "S6": "S6 speed 100 % to 30 %: time to settle within 2 %",
-        "S7": "S7 1 Hz sine sweep at 50 %: lag of actual behind commanded",
+        "S7": "S7 1 Hz sine sweep at 50 %: lag of actual behind commanded (and how well the "
+        "shapes match; below 0.5 it does not follow)",
     }
     for key, label in labels.items():
         rows.append(f"| {label} | " + " | ".join(cell(n, key) for n in names) + " |")

@@ -133,16 +133,27 @@ def lag_s(
     step_s: float = 0.001,
     min_match: float = FOLLOW_MATCH,
 ) -> float:
-    """The shift of actual behind commanded (both sampled every step_s) that matches them best.
+    """The lag of lag_and_match, infinite when the match is below min_match."""
+    lag, match = lag_and_match(commanded, actual, max_lag_s, step_s)
+    return lag if match >= min_match else math.inf
 
-    Infinite when the machine does not follow: it barely moved, the best shift is the end of the
-    search window (no optimum inside it), or even shifted the velocity matches the command with
-    a normalised correlation below min_match (it moved, but not like the stick).
+
+def lag_and_match(
+    commanded: Sequence[tuple[float, float]],
+    actual: Sequence[tuple[float, float]],
+    max_lag_s: float = 0.5,
+    step_s: float = 0.001,
+) -> tuple[float, float]:
+    """The shift of actual behind commanded (both sampled every step_s) that matches them best,
+    and how well they match there (normalised correlation, 1 = the same shape).
+
+    The lag is infinite when the machine barely moved or the best shift is the end of the
+    search window (no optimum inside it); the match is then 0.
     """
     cmd = [c for _, c in commanded]
     act = [a for _, a in actual]
     if max((abs(a) for a in act), default=0.0) < 0.05 * max((abs(c) for c in cmd), default=1.0):
-        return math.inf  # the machine hardly moved: there is no lag to speak of, it never followed
+        return math.inf, 0.0  # the machine hardly moved: it never followed
     # Running sums of squares, so each shift's normalisation costs O(1).
     cmd_sq = list(itertools.accumulate((c * c for c in cmd), initial=0.0))
     act_sq = list(itertools.accumulate((a * a for a in act), initial=0.0))
@@ -160,6 +171,6 @@ def lag_s(
         match = dot / power if power > 0 else 0.0
         if match > best_match:
             best_k, best_match = k, match
-    if best_k == last_k or best_match < min_match:
-        return math.inf
-    return best_k * step_s
+    if best_k == last_k:
+        return math.inf, 0.0
+    return best_k * step_s, best_match

@@ -215,9 +215,11 @@ def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) ->
         x = DIRECTION * math.sin(2 * math.pi * freq_hz * (tk - t0 + phase_s))
         commanded.append((tk, x * speed * ph.speed_mm_s))
     actual = [(tt, v[0]) for tt, v in measure.sample_velocity(vs.rig.trace, a0, a1)]
-    lag = measure.lag_s(commanded, actual)
+    lag, match = measure.lag_and_match(commanded, actual)
+    if match < measure.FOLLOW_MATCH:
+        lag = math.inf
     return Run(
-        {"lag_s": lag},
+        {"lag_s": lag, "match": match},
         _series(vs, t0, t0 + duration_s),
         [(tt - t0, c) for tt, c in commanded[::2]],
     )

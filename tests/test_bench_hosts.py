@@ -111,6 +111,7 @@ def test_lag_is_the_delay_of_a_follower_and_infinite_for_one_that_does_not_follo
     commanded = [(t, math.sin(2 * math.pi * t)) for t in ts]
     delayed = [(t, math.sin(2 * math.pi * (t - 0.120))) for t in ts]
     assert measure.lag_s(commanded, delayed) == pytest.approx(0.120, abs=0.002)
+    assert measure.lag_and_match(commanded, delayed)[1] > 0.99
     # Moving, but at a rhythm of its own (a 3 Hz square wave): no shift makes it the command.
     own = [(t, 1.0 if math.sin(2 * math.pi * 3 * t) >= 0 else -1.0) for t in ts]
     assert math.isinf(measure.lag_s(commanded, own))
