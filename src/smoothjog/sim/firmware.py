@@ -533,9 +533,8 @@ class GrblFirmware:
         power-up and reset, and st_go_idle waits the step-idle delay unless $1=255 (or the
         state before was Sleep), with no alarm pending any more at that point.
         """
-        lock_ms = self.settings.int_value(1)
-        if (lock_ms != 255 or self.state == SLEEP) and lock_ms > 0:
-            self._freeze(now_s, lock_ms / 1000.0)
+        self._step_idle_delay(now_s)
+        if self._frozen(now_s):
             self._after_freeze = self._banner
         else:
             self._banner(now_s)
@@ -703,9 +702,19 @@ class GrblFirmware:
                 return
         raise RuntimeError("simulated main loop made no progress (a bug in the model)")
 
+    def _frozen(self, now_s: float) -> bool:
+        """True while the main loop gets no CPU (an ISR delay, a blocking pause, a TX wait)."""
+        return self._frozen_until_s > now_s + _EPS_S
+
+    def _taken_over(self, head: _Step | None, now_s: float) -> bool:
+        """After a checkpoint: True when a freeze, an abort or an alarm now decides what runs."""
+        if self._after_freeze is not None or self._frozen(now_s) or self._locked:
+            return True
+        return head is not (self._steps[0] if self._steps else None)
+
     def _step_once(self, now_s: float) -> bool:
         """One unit of main-loop work at now_s; False when it must wait."""
-        if now_s < self._frozen_until_s - _EPS_S:
+        if self._frozen(now_s):
             return False
         if self._after_freeze is not None:
             fn, self._after_freeze = self._after_freeze, None
@@ -747,10 +756,8 @@ class GrblFirmware:
             return self._dwell_step(head, now_s)
         # Everything else waits inside protocol_execute_realtime: a checkpoint first.
         changed = self._checkpoint(now_s)
-        if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
+        if self._taken_over(head, now_s):
             return True
-        if self._locked or head is not (self._steps[0] if self._steps else None):
-            return True  # an abort or alarm changed the picture
         if self.suspend:
             return changed
         if head is None:
@@ -783,7 +790,8 @@ class GrblFirmware:
             # runs, and delay_sec returns at the top of its next pass.
             if now_s + _EPS_S < head.aborting_s:
                 return False
-            return self._checkpoint(now_s) or True
+            self._checkpoint(now_s)
+            return True
         if head.paused_s is None and (head.check_s is None or now_s + _EPS_S < head.check_s):
             if head.check_s is None and now_s + _EPS_S >= head.end_s:
                 self._steps.popleft()
@@ -793,10 +801,8 @@ class GrblFirmware:
             head.aborting_s = now_s + DWELL_STEP_S
             return False
         changed = self._checkpoint(now_s)
-        if self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
+        if self._taken_over(head, now_s):
             return True
-        if self._locked or not self._steps or self._steps[0] is not head:
-            return True  # an abort or alarm changed the picture
         if self.suspend:
             if head.paused_s is None:
                 head.paused_s = now_s
@@ -853,7 +859,7 @@ class GrblFirmware:
         # Hot path (every main-loop wait): with no flag raised protocol_exec_rt_system does nothing.
         raised = self._rt or self._rt_alarm or self._pending_overrides
         changed = self._rt_system(now_s) if raised else False
-        if self._locked or self._after_freeze is not None or self._frozen_until_s > now_s + _EPS_S:
+        if self._locked or self._after_freeze is not None or self._frozen(now_s):
             return True
         if self.suspend:
             changed = self._suspend_pass(now_s) or changed

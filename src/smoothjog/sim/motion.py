@@ -229,14 +229,12 @@ class Motion:
             feed_override=feed_override and not rapid,
             junction_sqr=junction_sqr,
         )
-        nominal = self._nominal_mm_s(block)
-        block.nominal_mm_s = nominal
-        block.max_entry_sqr = min(junction_sqr, nominal * nominal, self._prev_nominal_mm_s**2)
+        self._set_speed_limits(block, self._prev_nominal_mm_s)
         was_empty = not self._blocks
         self._blocks.append(block)
         self._planner_steps = target_steps
         self._prev_unit = unit_vec
-        self._prev_nominal_mm_s = nominal
+        self._prev_nominal_mm_s = block.nominal_mm_s
         if was_empty:
             # The preparer starts this block fresh, from whatever speed it has reached (zero here).
             self._prep_d_mm = 0.0
@@ -244,6 +242,11 @@ class Motion:
         if self._running and not self._hold:
             self._fill_segments()
         return True
+
+    def _set_speed_limits(self, block: _Block, prev_nominal_mm_s: float) -> None:
+        """plan_compute_profile_parameters: nominal speed and the entry limit of one block."""
+        block.nominal_mm_s = nominal = self._nominal_mm_s(block)
+        block.max_entry_sqr = min(block.junction_sqr, nominal * nominal, prev_nominal_mm_s**2)
 
     def _nominal_mm_s(self, block: _Block) -> float:
         """plan_compute_profile_nominal_speed: the programmed rate under the overrides."""
@@ -268,8 +271,7 @@ class Motion:
         self._rapid_ovr = rapid_pct / 100.0
         prev_nominal = math.inf  # the tail block's entry is not limited by a previous block
         for b in self._blocks:
-            b.nominal_mm_s = self._nominal_mm_s(b)
-            b.max_entry_sqr = min(b.junction_sqr, b.nominal_mm_s**2, prev_nominal**2)
+            self._set_speed_limits(b, prev_nominal)
             prev_nominal = b.nominal_mm_s
         if self._blocks:
             self._prev_nominal_mm_s = prev_nominal
