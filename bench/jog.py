@@ -52,6 +52,15 @@ REAL_FIRMWARE: dict[str, dict[str, tuple[float, ...]]] = {
     },
 }
 
+#: The measured quantities behind each real-firmware figure, in the same order.
+REAL_METRICS: dict[str, tuple[str, ...]] = {
+    "S1": ("dist_mm", "time_s"),
+    "S2": ("within_2pct", "dips"),
+    "S3": ("time_s",),
+    "S4": ("dist_mm",),
+    "S5": ("dist_mm", "time_s"),
+}
+
 SMOOTHJOG = "smoothjog"
 
 #: How the reference runs are modelled, printed under the comparison.
@@ -219,16 +228,9 @@ def calibration(results: dict[str, dict[str, dict[str, float]]]) -> list[str]:
         "| method | scenario | simulator | real Grbl 1.1h | within 10 % |",
         "|---|---|---|---|---|",
     ]
-    keys = {
-        "S1": ("dist_mm", "time_s"),
-        "S2": ("within_2pct", "dips"),
-        "S3": ("time_s",),
-        "S4": ("dist_mm",),
-        "S5": ("dist_mm", "time_s"),
-    }
     for name, real in REAL_FIRMWARE.items():
         for key, values in real.items():
-            sim = [results[name][key][m] for m in keys[key]]
+            sim = [results[name][key][m] for m in REAL_METRICS[key]]
             oks = []
             for s, r in zip(sim, values, strict=True):
                 if math.isinf(r) or math.isinf(s):

@@ -126,29 +126,19 @@ def settle_time(
     return last_out - t0_s + 0.001
 
 
-def lag_s(
-    commanded: Sequence[tuple[float, float]],
-    actual: Sequence[tuple[float, float]],
-    max_lag_s: float = 0.5,
-    step_s: float = 0.001,
-    min_match: float = FOLLOW_MATCH,
-) -> float:
-    """The lag of lag_and_match, infinite when the match is below min_match."""
-    lag, match = lag_and_match(commanded, actual, max_lag_s, step_s)
-    return lag if match >= min_match else math.inf
-
-
 def lag_and_match(
     commanded: Sequence[tuple[float, float]],
     actual: Sequence[tuple[float, float]],
     max_lag_s: float = 0.5,
     step_s: float = 0.001,
+    min_match: float = FOLLOW_MATCH,
 ) -> tuple[float, float]:
     """The shift of actual behind commanded (both sampled every step_s) that matches them best,
     and how well they match there (normalised correlation, 1 = the same shape).
 
-    The lag is infinite when the machine barely moved or the best shift is the end of the
-    search window (no optimum inside it); the match is then 0.
+    The lag is infinite when the machine does not follow: it barely moved, the best shift is the
+    end of the search window (no optimum inside it; the match is then 0), or even shifted the
+    velocity matches the command less than min_match (it moved, but not like the stick).
     """
     cmd = [c for _, c in commanded]
     act = [a for _, a in actual]
@@ -173,4 +163,4 @@ def lag_and_match(
             best_k, best_match = k, match
     if best_k == last_k:
         return math.inf, 0.0
-    return best_k * step_s, best_match
+    return (best_k * step_s if best_match >= min_match else math.inf), best_match

@@ -216,8 +216,6 @@ def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) ->
         commanded.append((tk, x * speed * ph.speed_mm_s))
     actual = [(tt, v[0]) for tt, v in measure.sample_velocity(vs.rig.trace, a0, a1)]
     lag, match = measure.lag_and_match(commanded, actual)
-    if match < measure.FOLLOW_MATCH:
-        lag = math.inf
     return Run(
         {"lag_s": lag, "match": match},
         _series(vs, t0, t0 + duration_s),

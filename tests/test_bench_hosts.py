@@ -10,14 +10,14 @@ from smoothjog.core.jogger import SendLine
 from smoothjog.vsession import VirtualSession
 
 
-def _send_times(vs: VirtualSession, t0: float, hold_s: float) -> list[float]:
-    """Times (from t0) at which the host wrote a jog line while the stick is held."""
-    sent: list[float] = []
+def _jog_lines(vs: VirtualSession, t0: float, hold_s: float) -> list[tuple[float, str]]:
+    """The jog lines the host wrote while the stick was held, with their times from t0."""
+    sent: list[tuple[float, str]] = []
     forward = vs._send
 
     def spy(output: object) -> None:
         if isinstance(output, SendLine) and output.text.startswith("$J="):
-            sent.append(vs.now_s - t0)
+            sent.append((vs.now_s - t0, output.text))
         forward(output)  # type: ignore[arg-type]
 
     vs._send = spy  # type: ignore[method-assign]
@@ -29,7 +29,7 @@ def _send_times(vs: VirtualSession, t0: float, hold_s: float) -> list[float]:
 def test_pendant_timer_fires_late_and_drifts_from_its_own_firing() -> None:
     vs, t0 = sc._session(hosts.PendantPost150, "hobby-router", "grbl")
     late = hosts.PendantPost150.timer_late_s
-    sent = _send_times(vs, t0, 1.0)
+    sent = [t for t, _line in _jog_lines(vs, t0, 1.0)]
     # The first line goes with the press, the second 100 ms later, then one every 150 ms; each
     # timer firing is `late` after it was due and the next is armed from that firing.
     expected = [0.0, 0.100 + late]
@@ -41,17 +41,7 @@ def test_pendant_timer_fires_late_and_drifts_from_its_own_firing() -> None:
 
 def test_pendant_lines_are_150_ms_of_travel_at_the_full_feed() -> None:
     vs, t0 = sc._session(hosts.PendantPost150, "hobby-router", "grbl")
-    lines: list[str] = []
-    forward = vs._send
-
-    def spy(output: object) -> None:
-        if isinstance(output, SendLine) and output.text.startswith("$J="):
-            lines.append(output.text)
-        forward(output)  # type: ignore[arg-type]
-
-    vs._send = spy  # type: ignore[method-assign]
-    vs.set_intent(sc._stick(1.0))
-    vs.run_until(t0 + 0.5)
+    lines = [line for _t, line in _jog_lines(vs, t0, 0.5)]
     # 5000 mm/min for 150 ms is 12.5 mm, toward -X; no cancel byte is ever part of the method.
     assert lines
     assert all("X-12.5" in line and "F5000" in line for line in lines)
@@ -76,19 +66,7 @@ def test_pendant_release_stops_sending_and_the_queue_runs_out() -> None:
 def test_calibration_flags_a_row_more_than_10_percent_off() -> None:
     results = {
         name: {
-            key: dict(
-                zip(
-                    {
-                        "S1": ("dist_mm", "time_s"),
-                        "S2": ("within_2pct", "dips"),
-                        "S3": ("time_s",),
-                        "S4": ("dist_mm",),
-                        "S5": ("dist_mm", "time_s"),
-                    }[key],
-                    values,
-                    strict=True,
-                )
-            )
+            key: dict(zip(jog.REAL_METRICS[key], values, strict=True))
             for key, values in real.items()
         }
         for name, real in jog.REAL_FIRMWARE.items()
@@ -110,10 +88,10 @@ def test_lag_is_the_delay_of_a_follower_and_infinite_for_one_that_does_not_follo
     ts = [k * 0.001 for k in range(3000)]
     commanded = [(t, math.sin(2 * math.pi * t)) for t in ts]
     delayed = [(t, math.sin(2 * math.pi * (t - 0.120))) for t in ts]
-    assert measure.lag_s(commanded, delayed) == pytest.approx(0.120, abs=0.002)
+    assert measure.lag_and_match(commanded, delayed)[0] == pytest.approx(0.120, abs=0.002)
     assert measure.lag_and_match(commanded, delayed)[1] > 0.99
     # Moving, but at a rhythm of its own (a 3 Hz square wave): no shift makes it the command.
     own = [(t, 1.0 if math.sin(2 * math.pi * 3 * t) >= 0 else -1.0) for t in ts]
-    assert math.isinf(measure.lag_s(commanded, own))
+    assert math.isinf(measure.lag_and_match(commanded, own)[0])
     # Standing still.
-    assert math.isinf(measure.lag_s(commanded, [(t, 0.0) for t in ts]))
+    assert math.isinf(measure.lag_and_match(commanded, [(t, 0.0) for t in ts])[0])
