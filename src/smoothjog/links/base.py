@@ -72,6 +72,62 @@ def check_realtime(byte: bytes) -> None:
         )
 
 
+#: Bytes a link may hold before send_line waits; far above what character counting allows.
+QUEUE_HIGH_WATER_BYTES = 64 * 1024
+#: Most bytes a transport hands to the operating system in one write.
+WRITE_CHUNK_BYTES = 4096
+#: Most bytes a transport takes from the operating system in one read.
+READ_CHUNK_BYTES = 65536
+
+
+class OutQueue:
+    """What a transport has accepted but not yet written: encoded lines and realtime bytes.
+
+    `items` holds them oldest first (a transport may put a realtime byte ahead of lines);
+    `size` counts their bytes. put() makes send_line wait while the queue is past its high-water
+    mark, and taken() / clear() let it go on.
+    """
+
+    def __init__(self) -> None:
+        """An empty queue."""
+        self.items: collections.deque[bytes] = collections.deque()
+        self.size = 0
+        self._room = asyncio.Event()
+        self._room.set()
+
+    async def put(self, data: bytes, check_usable: Callable[[], None]) -> None:
+        """Append data once the queue is under its high-water mark.
+
+        check_usable raises the link's error; it runs before every wait and after it, so a
+        link that fails or closes meanwhile never queues the data.
+        """
+        while True:
+            check_usable()
+            if self.size < QUEUE_HIGH_WATER_BYTES:
+                break
+            self._room.clear()
+            await self._room.wait()
+        self.items.append(data)
+        self.size += len(data)
+
+    def insert(self, index: int, data: bytes) -> None:
+        """Put data at index, ahead of what follows (a realtime byte overtaking lines)."""
+        self.items.insert(index, data)
+        self.size += len(data)
+
+    def taken(self, nbytes: int) -> None:
+        """nbytes left the queue (written); wake a waiting put() if there is room again."""
+        self.size -= nbytes
+        if self.size < QUEUE_HIGH_WATER_BYTES:
+            self._room.set()
+
+    def clear(self) -> None:
+        """Drop everything (closed or lost); waiting put() calls wake up and find the error."""
+        self.items.clear()
+        self.size = 0
+        self._room.set()
+
+
 class LineInbox:
     """Received bytes in, whole lines out, in order; ends with a LinkError, never a hang."""
 

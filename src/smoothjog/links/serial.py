@@ -11,7 +11,6 @@ error. The cost: this needs a selector event loop on a POSIX system (Linux, macO
 from __future__ import annotations
 
 import asyncio
-import collections
 import errno
 import itertools
 import os
@@ -21,18 +20,13 @@ import serial
 
 from smoothjog.core.errors import LinkError
 from smoothjog.core.responses import Banner, parse_response
-from smoothjog.links.base import LineInbox, Link
+from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
 #: Grbl's default baud rate (facts §5.1).
 DEFAULT_BAUD = 115200
 #: An Arduino-based Grbl resets when the port opens (DTR); its bootloader waits about 1-2 s before
 #: Grbl prints the banner.
 DEFAULT_WAIT_BANNER_S = 2.5
-#: Lines the link may hold before send_line waits; far above what character counting allows.
-QUEUE_HIGH_WATER_BYTES = 64 * 1024
-#: Most bytes handed to the OS in one write.
-_WRITE_CHUNK_BYTES = 4096
-_READ_CHUNK_BYTES = 65536
 
 
 def is_banner(line: bytes) -> bool:
@@ -58,13 +52,11 @@ class SerialLink(Link):
         self._fd = -1
         self._inbox = LineInbox()
         # Each entry is one encoded line or one realtime byte, not yet fully written.
-        self._out: collections.deque[bytes] = collections.deque()
-        # Bytes of _out[0] already written: a realtime byte must not land inside that line.
+        self._out = OutQueue()
+        # Bytes of the first queued item already written: a realtime byte must not land inside
+        # that line.
         self._head_written = 0
-        self._queued_bytes = 0
         self._writer_armed = False
-        self._room = asyncio.Event()
-        self._room.set()
         self._error: LinkError | None = None
         self.banner_seen = False
 
@@ -75,7 +67,7 @@ class SerialLink(Link):
     @property
     def queued_bytes(self) -> int:
         """Bytes accepted by the link but not yet handed to the operating system."""
-        return self._queued_bytes
+        return self._out.size
 
     async def open(self) -> None:
         """Open the port and wait up to wait_banner_s for the banner a reset prints."""
@@ -110,8 +102,6 @@ class SerialLink(Link):
             return
         self._stop_watching()
         self._out.clear()
-        self._queued_bytes = 0
-        self._room.set()
         closed = LinkError(f"the link to {self.describe()} was closed")
         if self._error is None:
             self._error = closed
@@ -120,14 +110,7 @@ class SerialLink(Link):
 
     async def _write_line(self, data: bytes) -> None:
         """Queue a line and write what the OS accepts now; wait while the queue is too long."""
-        while True:
-            self._check_usable()
-            if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
-                break
-            self._room.clear()
-            await self._room.wait()
-        self._out.append(data)
-        self._queued_bytes += len(data)
+        await self._out.put(data, self._check_usable)
         self._flush()
 
     def _write_realtime(self, byte: bytes) -> None:
@@ -136,7 +119,6 @@ class SerialLink(Link):
         # A line already partly written must finish first: grblHAL drops a half-read line on a
         # jog cancel (facts §7), which would turn its second half into a garbled new line.
         self._out.insert(1 if self._head_written else 0, byte)
-        self._queued_bytes += 1
         self._flush()
 
     def _check_usable(self) -> None:
@@ -148,10 +130,11 @@ class SerialLink(Link):
 
     def _flush(self) -> None:
         """Write as much of the queue as the OS takes; arm the writer callback for the rest."""
-        while self._out:
-            chunk = bytearray(self._out[0][self._head_written :])
-            for item in itertools.islice(self._out, 1, None):
-                if len(chunk) + len(item) > _WRITE_CHUNK_BYTES:
+        items = self._out.items
+        while items:
+            chunk = bytearray(items[0][self._head_written :])
+            for item in itertools.islice(items, 1, None):
+                if len(chunk) + len(item) > WRITE_CHUNK_BYTES:
                     break
                 chunk += item
             try:
@@ -164,17 +147,16 @@ class SerialLink(Link):
             self._consume(written)
             if written < len(chunk):
                 break
-        self._arm_writer(bool(self._out))
-        if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
-            self._room.set()
+        self._arm_writer(bool(items))
 
     def _consume(self, written: int) -> None:
         """Drop written bytes from the front of the queue."""
-        self._queued_bytes -= written
+        self._out.taken(written)
+        items = self._out.items
         while written > 0:
-            left_in_head = len(self._out[0]) - self._head_written
+            left_in_head = len(items[0]) - self._head_written
             if written >= left_in_head:
-                self._out.popleft()
+                items.popleft()
                 self._head_written = 0
                 written -= left_in_head
             else:
@@ -195,7 +177,7 @@ class SerialLink(Link):
     def _on_readable(self) -> None:
         """Read what arrived and frame it into lines."""
         try:
-            data = os.read(self._fd, _READ_CHUNK_BYTES)
+            data = os.read(self._fd, READ_CHUNK_BYTES)
         except BlockingIOError:
             return
         except OSError as exc:
@@ -215,8 +197,6 @@ class SerialLink(Link):
         )
         self._error = error
         self._out.clear()
-        self._queued_bytes = 0
-        self._room.set()
         self._inbox.peer_gone(error)
 
     def _stop_watching(self) -> None:

@@ -9,21 +9,16 @@ turned on so a controller that vanishes without closing (power cut, Wi-Fi gone) 
 from __future__ import annotations
 
 import asyncio
-import collections
 import contextlib
 import errno
 import socket
 
 from smoothjog.core.errors import LinkError
-from smoothjog.links.base import LineInbox, Link
+from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
 #: FluidNC's telnet port (facts §7); grblHAL's telnet plugin uses 23 as well.
 DEFAULT_TCP_PORT = 23
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
-#: Lines the link may hold before send_line waits; far above what character counting allows.
-QUEUE_HIGH_WATER_BYTES = 64 * 1024
-_WRITE_CHUNK_BYTES = 4096
-_READ_CHUNK_BYTES = 65536
 # Keepalive: first probe after 5 s of silence, then every 2 s, give up after 3 (about 11 s).
 _KEEPALIVE_IDLE_S = 5
 _KEEPALIVE_INTERVAL_S = 2
@@ -47,11 +42,8 @@ class TcpLink(Link):
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._inbox = LineInbox()
-        self._out: collections.deque[bytes] = collections.deque()
-        self._queued_bytes = 0
+        self._out = OutQueue()
         self._have_data = asyncio.Event()
-        self._room = asyncio.Event()
-        self._room.set()
         self._tasks: list[asyncio.Task[None]] = []
         self._error: LinkError | None = None
 
@@ -63,7 +55,7 @@ class TcpLink(Link):
     @property
     def queued_bytes(self) -> int:
         """Bytes accepted by the link but not yet handed to the transport."""
-        return self._queued_bytes
+        return self._out.size
 
     async def open(self) -> None:
         """Connect, within connect_timeout_s."""
@@ -73,7 +65,7 @@ class TcpLink(Link):
             raise LinkError(f"TCP port {self.port} is out of range: use 1-65535 (FluidNC: 23)")
         try:
             reader, writer = await asyncio.wait_for(
-                asyncio.open_connection(self.host, self.port, limit=_READ_CHUNK_BYTES),
+                asyncio.open_connection(self.host, self.port, limit=READ_CHUNK_BYTES),
                 self.connect_timeout_s,
             )
         except TimeoutError:
@@ -114,8 +106,6 @@ class TcpLink(Link):
             self._error = closed
         self._inbox.close(closed)
         self._out.clear()
-        self._queued_bytes = 0
-        self._room.set()
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
@@ -128,14 +118,7 @@ class TcpLink(Link):
 
     async def _write_line(self, data: bytes) -> None:
         """Queue a line for the writer task; wait while the queue is too long."""
-        while True:
-            self._check_usable()
-            if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
-                break
-            self._room.clear()
-            await self._room.wait()
-        self._out.append(data)
-        self._queued_bytes += len(data)
+        await self._out.put(data, self._check_usable)
         self._have_data.set()
 
     def _write_realtime(self, byte: bytes) -> None:
@@ -157,15 +140,12 @@ class TcpLink(Link):
             while True:
                 await self._have_data.wait()
                 chunk = bytearray()
-                while self._out and (
-                    not chunk or len(chunk) + len(self._out[0]) <= _WRITE_CHUNK_BYTES
-                ):
-                    chunk += self._out.popleft()
-                if not self._out:
+                items = self._out.items
+                while items and (not chunk or len(chunk) + len(items[0]) <= WRITE_CHUNK_BYTES):
+                    chunk += items.popleft()
+                if not items:
                     self._have_data.clear()
-                self._queued_bytes -= len(chunk)
-                if self._queued_bytes < QUEUE_HIGH_WATER_BYTES:
-                    self._room.set()
+                self._out.taken(len(chunk))
                 writer.write(chunk)
                 await writer.drain()
         except OSError as exc:
@@ -175,7 +155,7 @@ class TcpLink(Link):
         """Frame received bytes into lines until the peer closes or fails."""
         try:
             while True:
-                data = await reader.read(_READ_CHUNK_BYTES)
+                data = await reader.read(READ_CHUNK_BYTES)
                 if not data:
                     self._lost("the controller closed the connection")
                     return
@@ -193,8 +173,6 @@ class TcpLink(Link):
         )
         self._error = error
         self._out.clear()
-        self._queued_bytes = 0
-        self._room.set()
         self._inbox.peer_gone(error)
 
     def _connect_error(self, exc: OSError) -> LinkError:
