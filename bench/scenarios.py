@@ -96,13 +96,24 @@ def _hold_s(ph: Physics) -> float:
     return max(2.0, 3.0 * ph.stop_s)
 
 
-def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed: float) -> Run:
-    """S1/S5: hold, then release; distance and time to standstill after the release."""
+def _held(
+    factory: Factory, machine: str, firmware: str, phase_s: float, speed: float = 1.0
+) -> tuple[Physics, VirtualSession, float]:
+    """Press the stick toward -X at speed and hold it up to the scenario's event (hold + phase).
+
+    Returns the profile's physics, the session and the event time.
+    """
     ph = physics(machine)
     vs, t0 = _session(factory, machine, firmware)
     vs.set_intent(_stick(speed))
-    t_rel = t0 + _hold_s(ph) + phase_s
-    vs.run_until(t_rel)
+    t_event = t0 + _hold_s(ph) + phase_s
+    vs.run_until(t_event)
+    return ph, vs, t_event
+
+
+def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed: float) -> Run:
+    """S1/S5: hold, then release; distance and time to standstill after the release."""
+    _ph, vs, t_rel = _held(factory, machine, firmware, phase_s, speed)
     vs.set_intent(_stick(speed, 0.0))
     vs.run_until_idle(30.0)
     vs.run_until(vs.now_s + 0.5)
@@ -135,11 +146,7 @@ def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
 
 def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
     """S3: full speed one way, then the other: time to full speed the other way."""
-    ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
-    vs.set_intent(_stick(1.0))
-    t_rev = t0 + _hold_s(ph) + phase_s
-    vs.run_until(t_rev)
+    ph, vs, t_rev = _held(factory, machine, firmware, phase_s)
     # The stick flips through neutral in one instant: each method reacts to both events as it
     # is written (the reference methods cancel at neutral); smoothjog acts on the newest intent.
     vs.set_intent(_stick(1.0, 0.0))
@@ -157,11 +164,7 @@ def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> R
 
 def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
     """S4: the host dies mid-jog: how far the machine coasts on what was queued."""
-    ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
-    vs.set_intent(_stick(1.0))
-    t_kill = t0 + _hold_s(ph) + phase_s
-    vs.run_until(t_kill)
+    _ph, vs, t_kill = _held(factory, machine, firmware, phase_s)
     vs.kill()
     vs.run_until(t_kill + 20.0)
     trace = vs.rig.trace
@@ -176,11 +179,7 @@ def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -
 
 def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
     """S6: 100 % to 30 %: time to settle within 2 % of the new speed."""
-    ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
-    vs.set_intent(_stick(1.0))
-    t_change = t0 + _hold_s(ph) + phase_s
-    vs.run_until(t_change)
+    ph, vs, t_change = _held(factory, machine, firmware, phase_s)
     vs.set_intent(_stick(0.3))
     t_end = t_change + 3 * ph.stop_s + 1.5
     vs.run_until(t_end + 0.1)
