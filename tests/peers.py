@@ -2,9 +2,10 @@
 
 `ScriptedGrbl` is the protocol side only: bytes in, bytes out, no I/O. It answers `$I`, `$$`,
 `$G`, `$#`, `$X`, empty lines, G-code and `$J=` lines, and the `?` and Ctrl-X realtime bytes with
-the exact forms of facts §5.3/§5.4, and records everything it received. `PtyPeer` and `TcpPeer`
-run one in a thread behind real bytes, so both asyncio tests and subprocess tests can talk to it.
-Knobs make it misbehave on purpose: silent, not Grbl at all, a reset in mid-handshake, in Alarm.
+the exact forms of firmware-facts §5.3/§5.4, and records everything it received. `PtyPeer` and
+`TcpPeer` run one in a thread behind real bytes, so both asyncio tests and subprocess tests can talk
+to it. Knobs make it misbehave on purpose: silent, not Grbl at all, a reset in mid-handshake, in
+Alarm.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
 
-#: Grbl 1.1h default settings in `$$` order and print format (facts §0, §5.3).
+#: Grbl 1.1h default settings in `$$` order and print format (firmware-facts §0, §5.3).
 DEFAULT_SETTINGS: dict[int, str] = {
     0: "10", 1: "25", 2: "0", 3: "0", 4: "0", 5: "0", 6: "0",
     10: "1", 11: "0.010", 12: "0.002", 13: "0",
@@ -111,7 +112,7 @@ class ScriptedGrbl:
         return b"".join(text.encode() + b"\r\n" for text in self._builtin(command))
 
     def _builtin(self, command: str) -> list[str]:
-        """Grbl 1.1h's own reply lines to a command (facts §5.3)."""
+        """Grbl 1.1h's own reply lines to a command (firmware-facts §5.3)."""
         alarm = self.state == "Alarm"
         if command == "":
             return ["ok"]

@@ -8,6 +8,7 @@ import pytest
 
 from smoothjog.config import (
     CONFIG_ENV,
+    DEFAULT_HTTP_PORT,
     Config,
     ConnectionConfig,
     JogConfig,
@@ -83,6 +84,19 @@ def test_every_key_is_read(tmp_path: Path) -> None:
     )
     assert config.pendant == PendantConfig("0.0.0.0", 8899, True)
     assert config.sim == SimConfig("fluidnc", "hobby-router")
+
+
+def test_pendant_port_defaults_to_the_one_constant() -> None:
+    """An empty [pendant] and no [pendant] at all both serve on DEFAULT_HTTP_PORT (8080)."""
+    assert DEFAULT_HTTP_PORT == 8080
+    assert parse_config("").pendant.port == DEFAULT_HTTP_PORT
+    assert parse_config("[pendant]\n").pendant.port == DEFAULT_HTTP_PORT
+    assert PendantConfig().port == DEFAULT_HTTP_PORT
+
+
+@pytest.mark.parametrize("firmware", ["grbl", "grblhal", "fluidnc"])
+def test_every_known_firmware_is_accepted(firmware: str) -> None:
+    assert parse_config(f"[sim]\nfirmware = {firmware!r}\n").sim.firmware == firmware
 
 
 def test_tcp_connection(tmp_path: Path) -> None:

@@ -18,13 +18,16 @@ from types import MappingProxyType
 from typing import Any
 
 from smoothjog.core.errors import ConfigError, LinkError
+from smoothjog.core.firmware import DEFAULT_BAUD, FIRMWARE_NAMES
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.units import ALL_AXES
 from smoothjog.links.tcp import parse_tcp_url
 
 #: Environment variable naming a config file when none is given on the command line.
 CONFIG_ENV = "SMOOTHJOG_CONFIG"
-FIRMWARES = ("grbl", "grblhal", "fluidnc")
+#: The pendant's TCP port unless [pendant] port or --http-port says otherwise. It lives here with
+#: the other [pendant] defaults, the one module both the CLI and the web server may import.
+DEFAULT_HTTP_PORT = 8080
 MAX_TIMEOUT_S = 600.0
 MAX_LINK_MARGIN_S = 1.0
 
@@ -34,7 +37,7 @@ class ConnectionConfig:
     """Where the controller is: a serial port or a TCP address (neither: the simulator)."""
 
     port: str | None = None
-    baud: int = 115200
+    baud: int = DEFAULT_BAUD
     connect: str | None = None  # tcp://HOST:PORT
     timeout_s: float = 5.0
 
@@ -58,7 +61,7 @@ class PendantConfig:
     """The web pendant's address."""
 
     host: str = "127.0.0.1"
-    port: int = 8080
+    port: int = DEFAULT_HTTP_PORT
     lan: bool = False  # reachable from other devices on the local network
 
 
@@ -222,7 +225,7 @@ def _connection(table: _Table) -> ConnectionConfig:
             parse_tcp_url(connect)
         except LinkError as exc:
             raise table.error("connect", f"is wrong: {exc}") from None
-    baud = table.integer("baud", 115200, at_least=1, at_most=10_000_000)
+    baud = table.integer("baud", DEFAULT_BAUD, at_least=1, at_most=10_000_000)
     timeout_s = table.number("timeout_s", 5.0, above=0.0, at_most=MAX_TIMEOUT_S)
     table.finish()
     return ConnectionConfig(port=port, baud=baud, connect=connect, timeout_s=timeout_s)
@@ -288,7 +291,7 @@ def _pendant(table: _Table) -> PendantConfig:
     """Read [pendant]."""
     host = table.text("host", "127.0.0.1")
     assert host is not None  # a default is given
-    port = table.integer("port", 8080, at_least=1, at_most=65535)
+    port = table.integer("port", DEFAULT_HTTP_PORT, at_least=1, at_most=65535)
     lan = table.flag("lan", False)
     table.finish()
     return PendantConfig(host=host, port=port, lan=lan)
@@ -296,7 +299,7 @@ def _pendant(table: _Table) -> PendantConfig:
 
 def _sim(table: _Table) -> SimConfig:
     """Read [sim]."""
-    firmware = table.choice("firmware", "grbl", FIRMWARES)
+    firmware = table.choice("firmware", "grbl", FIRMWARE_NAMES)
     machine = table.text("machine", "hobby-router")
     assert machine is not None  # a default is given
     table.finish()

@@ -1,9 +1,12 @@
-"""Tests for core/codes.py: complete tables, hints for jog-relevant codes, unknown codes cope."""
+"""Tests for core/codes.py: complete tables, hints, unknown codes cope, names match their rows."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import pytest
 
+from smoothjog.core import codes
 from smoothjog.core.codes import (
     ALARM_CODES,
     ERROR_CODES,
@@ -60,7 +63,7 @@ def test_jog_relevant_hints(lookup: object, code: int, word: str) -> None:
     assert word in info.hint
 
 
-# The facts' corrections to the firmware's own tables (facts §5.7, §8).
+# The facts' corrections to the firmware's own tables (firmware-facts §5.7, §8).
 CORRECTIONS = [
     (3, "'$J' without '='"),
     (8, "Alarm"),
@@ -109,3 +112,53 @@ def test_describe_is_one_sentence_with_the_hint(describe: object, code: int, sta
     assert "\n" not in text
     lookup = error_info if text.startswith("error") else alarm_info
     assert lookup(code).hint in text
+
+
+def _named(prefix: str) -> dict[str, int]:
+    """The module's int constants whose names start with prefix (ALARM_CODES is not one)."""
+    found = {name: getattr(codes, name) for name in dir(codes) if name.startswith(prefix)}
+    return {name: value for name, value in found.items() if isinstance(value, int)}
+
+
+@pytest.mark.parametrize(
+    ("prefix", "table", "firmware_prefix"),
+    [("ERR_", ERROR_CODES, "STATUS_"), ("ALARM_", ALARM_CODES, "EXEC_ALARM_")],
+    ids=["errors", "alarms"],
+)
+def test_each_named_code_is_its_rows_firmware_name(
+    prefix: str, table: Mapping[int, CodeInfo], firmware_prefix: str
+) -> None:
+    named = _named(prefix)
+    for name, code in named.items():
+        assert table[code].symbol == firmware_prefix + name.removeprefix(prefix), name
+    # Every assigned row has its constant, and no two constants share a code.
+    assigned = {code for code, info in table.items() if info.symbol is not None}
+    assert sorted(named.values()) == sorted(assigned)
+
+
+def test_unassigned_rows_have_no_symbol() -> None:
+    assert ERROR_CODES[18].symbol is None
+    assert ERROR_CODES[19].symbol is None
+
+
+# The codes the engine and the simulator test against, written out again (firmware-facts §5.6,
+# §5.7).
+@pytest.mark.parametrize(
+    ("name", "code"),
+    [
+        ("STATUS_OK", 0),
+        ("ERR_INVALID_STATEMENT", 3),
+        ("ERR_IDLE_ERROR", 8),
+        ("ERR_SYSTEM_GC_LOCK", 9),
+        ("ERR_SOFT_LIMIT_ERROR", 10),
+        ("ERR_OVERFLOW", 11),
+        ("ERR_TRAVEL_EXCEEDED", 15),
+        ("ERR_INVALID_JOG_COMMAND", 16),
+        ("ERR_GCODE_UNDEFINED_FEED_RATE", 22),
+        ("ERR_GCODE_UNUSED_WORDS", 36),
+        ("ALARM_SOFT_LIMIT", 2),
+        ("ALARM_ABORT_CYCLE", 3),
+    ],
+)
+def test_codes_a_host_meets(name: str, code: int) -> None:
+    assert getattr(codes, name) == code

@@ -11,7 +11,7 @@ from smoothjog.core.gcode import TravelBox
 from smoothjog.core.machine import KeepOut, MachineModel, Settings
 from smoothjog.core.responses import parse_response
 
-# The `$$` listing of a default Grbl 1.1h build (facts §0, §5.3).
+# The `$$` listing of a default Grbl 1.1h build (firmware-facts §0, §5.3).
 DEFAULT_LISTING = """\
 $0=10
 $1=25
@@ -63,7 +63,7 @@ def soft_limited(*extra: str) -> MachineModel:
 
 
 def test_defaults_before_anything_is_known() -> None:
-    """An empty model answers with Grbl 1.1h defaults (facts §0, §4.1, §5.1)."""
+    """An empty model answers with Grbl 1.1h defaults (firmware-facts §0, §4.1, §5.1)."""
     model = MachineModel()
     assert model.n_axes == 3
     assert model.axis_letters == ("X", "Y", "Z")
@@ -131,7 +131,8 @@ def test_settings_from_raw_skips_non_numbers() -> None:
 def test_planner_and_rx_sizes(
     firmware_banner: str, opt: str | None, blocks: int, usable: int, rx: int
 ) -> None:
-    """[OPT:] wins; otherwise per-firmware defaults; FluidNC can fill blocks - 1 (facts §7)."""
+    """[OPT:] wins; otherwise per-firmware defaults; FluidNC can fill blocks - 1 (firmware-facts
+    §7)."""
     model = feed(MachineModel(), "", firmware_banner, *([opt] if opt else []))
     assert (model.planner_blocks, model.planner_usable_blocks, model.rx_buffer_bytes) == (
         blocks,
@@ -172,7 +173,7 @@ def test_grblhal_compat_banner_is_refined_by_firmware_line() -> None:
 
 
 def test_status_with_mpos_and_wco_derives_wpos() -> None:
-    """WPos = MPos - WCO (facts §5.4)."""
+    """WPos = MPos - WCO (firmware-facts §5.4)."""
     model = feed(
         MachineModel(), "<Idle|MPos:-10.000,-20.000,-5.000|FS:0,0|WCO:-1.000,-2.000,-3.000>"
     )
@@ -356,7 +357,7 @@ def test_soft_limit_envelope(
 
 
 def test_envelope_is_none_without_soft_limits_and_ends_are_inclusive() -> None:
-    """$20=0 gives no envelope; both faces of the box count as inside (facts §2)."""
+    """$20=0 gives no envelope; both faces of the box count as inside (firmware-facts §2)."""
     assert feed(MachineModel(), "$22=1", "$20=0").soft_limit_envelope() is None
     box = soft_limited().soft_limit_envelope()
     assert box is not None
@@ -377,7 +378,7 @@ def test_envelope_is_none_without_soft_limits_and_ends_are_inclusive() -> None:
     ],
 )
 def test_looks_unhomed_with_soft_limits(lines: list[str], unhomed: bool) -> None:
-    """All-zero MPos with soft limits on in a default build looks unhomed (facts §2)."""
+    """All-zero MPos with soft limits on in a default build looks unhomed (firmware-facts §2)."""
     assert soft_limited(*lines).looks_unhomed() is unhomed
 
 

@@ -1,4 +1,5 @@
-"""Tests for core/responses.py: every form of facts §5.3, §5.4 and §7, and that it never raises."""
+"""Tests for core/responses.py: every form of firmware-facts §5.3, §5.4 and §7, and that it never
+raises."""
 
 from __future__ import annotations
 
@@ -81,13 +82,15 @@ def test_simple_forms(line: bytes | str, expected: Response) -> None:
     ],
 )
 def test_banners(line: str, firmware: str, version: str) -> None:
-    """The three firmwares' welcome lines name the firmware and its own version (facts §5.3, §7)."""
+    """The three firmwares' welcome lines name the firmware and its own version (firmware-facts
+    §5.3, §7)."""
     parsed = parse_response(line.encode() + b"\r\n")
     assert parsed == Banner(firmware, version, line)  # type: ignore[arg-type]
 
 
 def test_grbl_settings_list_from_facts() -> None:
-    """The whole `$$` list of a default 1.1h build parses, numbers as floats (facts §0, §5.3)."""
+    """The whole `$$` list of a default 1.1h build parses, numbers as floats (firmware-facts §0,
+    §5.3)."""
     listing = {
         0: "10", 1: "25", 2: "0", 3: "0", 4: "0", 5: "0", 6: "0", 10: "1", 11: "0.010",
         12: "0.002", 13: "0", 20: "0", 21: "0", 22: "0", 23: "0", 24: "25.000",
@@ -157,7 +160,7 @@ def test_build_info(line: str, expected: Response) -> None:
 
 
 def test_gcode_modes() -> None:
-    """`[GC:...]` keeps the G/M words in order and pulls out T, F and S (facts §5.3)."""
+    """`[GC:...]` keeps the G/M words in order and pulls out T, F and S (firmware-facts §5.3)."""
     line = "[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]"
     assert parse_response(line) == GcodeModes(
         ("G0", "G54", "G17", "G21", "G90", "G94", "M5", "M9"), 0.0, 0.0, 0, line
@@ -176,7 +179,7 @@ def _status(line: str) -> StatusReport:
 
 
 def test_full_status_report_in_grbl_order() -> None:
-    """Every 1.1h field in its fixed order lands in its own attribute (facts §5.4)."""
+    """Every 1.1h field in its fixed order lands in its own attribute (firmware-facts §5.4)."""
     line = (
         "<Jog|MPos:-1.000,2.500,-0.000|Bf:14,128|Ln:7|FS:500,0|Pn:XZP"
         "|WCO:1.000,2.000,3.000|Ov:100,50,120|A:SF>"
@@ -238,7 +241,7 @@ def test_status_fields_in_any_order() -> None:
     ],
 )
 def test_status_states(state_text: str, state: str, substate: int | None) -> None:
-    """The state word and its substate number are split (facts §5.4)."""
+    """The state word and its substate number are split (firmware-facts §5.4)."""
     report = _status(f"<{state_text}|MPos:0.000,0.000,0.000|FS:0,0>")
     assert (report.state, report.substate) == (state, substate)
 
@@ -289,7 +292,7 @@ def test_status_positions_and_feed(
 
 
 def test_negative_zero_keeps_its_sign_but_equals_zero() -> None:
-    """`-0.000` is a zero (rounding keeps the sign, facts §5.4)."""
+    """`-0.000` is a zero (rounding keeps the sign, firmware-facts §5.4)."""
     report = _status("<Idle|MPos:-0.000,0.000,0.000>")
     assert report.mpos is not None
     assert report.mpos[0] == 0.0

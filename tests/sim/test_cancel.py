@@ -1,5 +1,5 @@
-"""Jog cancel, feed hold, safety door and reset (facts §3), with Grbl 1.1h's flaws and the
-grblHAL / FluidNC differences of facts §7."""
+"""Jog cancel, feed hold, safety door and reset (firmware-facts §3), with Grbl 1.1h's flaws and the
+grblHAL / FluidNC differences of firmware-facts §7."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ JOG_LINE = "$J=G91X1F300\n"
 
 
 def stream_jogs(host: Host, count: int, rx_size: int = 128) -> int:
-    """Stream count jogs with character counting (facts §5.1); returns the oks received."""
+    """Stream count jogs with character counting (firmware-facts §5.1); returns the oks received."""
     outstanding: list[int] = []
     sent = acked = 0
     while sent < count:
@@ -40,14 +40,15 @@ def test_ghost_jog_grbl_runs_the_whole_cancelled_distance(cancel: bytes) -> None
     assert host.reply("$10=3") == "ok"
     acked = stream_jogs(host, 25)
     report = host.status()
-    # Planner full, one line blocked in mc_line, the rest waiting in RX (facts §3.1: Bf:0,24).
+    # Planner full, one line blocked in mc_line, the rest waiting in RX (firmware-facts §3.1:
+    # Bf:0,24).
     in_rx = 25 - acked - 1
     assert in_rx >= 5
     assert field(report, "Bf") == f"0,{128 - in_rx * len(JOG_LINE)}"
     host.send(cancel)
     acked += finish(host)
     assert acked == 25
-    assert mpos(host.status()) == (25.0, 0.0, 0.0)  # facts §3.1: start + 25 mm
+    assert mpos(host.status()) == (25.0, 0.0, 0.0)  # firmware-facts §3.1: start + 25 mm
 
 
 def test_grblhal_cancel_flushes_the_rx_buffer() -> None:

@@ -70,7 +70,7 @@ def test_stop_distance_is_v2_over_2a_plus_committed_segments(phase: float) -> No
 
 
 def test_diagonal_feed_is_capped_along_the_vector() -> None:
-    # facts §4.2: $110=$111=3000, diagonal XY at F10000 gives FS:4243; one axis gives 3000.
+    # firmware-facts §4.2: $110=$111=3000, diagonal XY at F10000 gives FS:4243; one axis gives 3000.
     axes = (AxisLimits(250, 3000, 10), AxisLimits(250, 3000, 10), AxisLimits(250, 500, 10))
     m = Motion(axes)
     m.plan_line((-1000.0, -1000.0, 0.0), 10000)

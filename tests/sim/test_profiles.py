@@ -1,4 +1,8 @@
-"""Machine and firmware profiles: shipped files load, bad files fail with file and key."""
+"""Machine and firmware profiles: shipped files load, bad files fail with file and key.
+
+The firmware profiles take their figures from the core firmware table; these tests check the
+simulated controller really runs with them.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +10,12 @@ from pathlib import Path
 
 import pytest
 
+from smoothjog.core.defaults import GRBL_DEFAULTS
 from smoothjog.core.errors import SimError
+from smoothjog.core.firmware import FIRMWARE_NAMES, firmware_facts
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import (
+    FIRMWARE_PROFILES,
     available_machine_profiles,
     get_firmware_profile,
     load_machine_profile,
@@ -129,3 +136,23 @@ def test_grbl_float_format(value: float, decimals: int, text: str) -> None:
 def test_settings_for_more_axes() -> None:
     settings = GrblSettings(4)
     assert "$103=250.000" in settings.dollar_lines()
+
+
+def test_every_family_is_simulated_with_its_table_row() -> None:
+    assert sorted(FIRMWARE_PROFILES) == sorted(FIRMWARE_NAMES)
+    for name in FIRMWARE_NAMES:
+        assert get_firmware_profile(name).facts is firmware_facts(name)
+
+
+@pytest.mark.parametrize("name", FIRMWARE_NAMES)
+def test_simulated_buffers_and_opt_line_follow_the_table(name: str) -> None:
+    facts = firmware_facts(name)
+    fw = GrblFirmware(get_firmware_profile(name), "grbl-defaults")
+    assert fw.rx.size == facts.rx_buffer_bytes
+    assert fw.motion.planner_blocks == facts.planner_usable_blocks
+    expected = f"[OPT:V,{facts.planner_usable_blocks},{facts.rx_buffer_bytes}]"
+    assert get_firmware_profile(name).options_line == expected
+
+
+def test_default_settings_are_grbls() -> None:
+    assert GrblSettings(3).snapshot() == {n: float(v) for n, v in GRBL_DEFAULTS.items()}

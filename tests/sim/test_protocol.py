@@ -1,4 +1,4 @@
-"""Conformance of the simulated Grbl 1.1h's line protocol with facts §1, §2 and §5."""
+"""Conformance of the simulated Grbl 1.1h's line protocol with firmware-facts §1, §2 and §5."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from tests.sim.rigtools import Host, field, mpos
 
-# (line, reply) pairs from facts §1.1-§1.3, sent through the simulated serial port in Idle.
+# (line, reply) pairs from firmware-facts §1.1-§1.3, sent through the simulated serial port in Idle.
 JOG_REPLIES = [
     ("$J=X1F100", "ok"),
     ("$j=x1f100", "ok"),
@@ -160,7 +160,7 @@ def test_alarm_state_rules(homing_machine: str) -> None:
     assert host.reply("$G") == "ok"
     assert host.command("$X")[-2:] == ["[MSG:Caution: Unlocked]", "ok"]
     assert host.state() == "Idle"
-    # Nothing is homed: MPos is 0 and every + jog leaves the box (facts §2).
+    # Nothing is homed: MPos is 0 and every + jog leaves the box (firmware-facts §2).
     assert host.reply("$J=G91X1F100") == "error:15"
 
 
@@ -204,7 +204,7 @@ def test_jog_in_run_state_is_error_8() -> None:
     assert host.reply("$J=X1F100") == "error:8"
 
 
-# ------------------------------------------------------------------ soft limits (facts §2)
+# ------------------------------------------------------------------ soft limits (firmware-facts §2)
 @pytest.mark.parametrize(
     ("line", "expected"),
     [
@@ -325,7 +325,8 @@ def test_sleep_blocks_lines_until_reset() -> None:
     assert host.run(0.5) == []
 
 
-# ------------------------------------------------------------------ status reports (facts §5.4)
+# ------------------------------------------------------------------ status reports (firmware-facts
+# §5.4)
 def test_wco_and_ov_counters_while_idle() -> None:
     host = Host()
     reports = [host.status() for _ in range(22)]
@@ -377,7 +378,7 @@ def test_fs_shows_the_capped_feed_and_zero_when_idle() -> None:
     host = Host()
     assert host.reply("$J=G91X100F10000") == "ok"
     host.run(2.0)
-    assert field(host.status(), "FS") == "500,0"  # capped at $110 (facts §4.2)
+    assert field(host.status(), "FS") == "500,0"  # capped at $110 (firmware-facts §4.2)
     host.send(b"\x85")
     host.wait_state("Idle")
     assert field(host.status(), "FS") == "0,0"
@@ -403,7 +404,8 @@ def test_door_during_homing_is_alarm_7_then_a_reset(homing_machine: str) -> None
     assert host.state() == "Alarm"
 
 
-# ------------------------------------------------------------------ overrides (facts §4.2, §5.2)
+# ------------------------------------------------------------------ overrides (firmware-facts §4.2,
+# §5.2)
 def _ov(host: Host) -> str | None:
     """Ov of the next report that is not the boot report carrying WCO (which defers Ov)."""
     report = host.status()

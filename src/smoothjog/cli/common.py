@@ -12,6 +12,7 @@ import argparse
 from dataclasses import replace
 
 from smoothjog.config import Config, ConnectionConfig, load_config
+from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.links.base import Link
 from smoothjog.links.serial import DEFAULT_WAIT_BANNER_S, SerialLink
 from smoothjog.links.sim import SimLink
@@ -25,9 +26,11 @@ def _positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number, e.g. 115200") from None
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a whole number, e.g. {DEFAULT_BAUD}"
+        ) from None
     if value <= 0:
-        raise argparse.ArgumentTypeError(f"{text} must be above 0, e.g. 115200")
+        raise argparse.ArgumentTypeError(f"{text} must be above 0, e.g. {DEFAULT_BAUD}")
     return value
 
 
@@ -55,7 +58,10 @@ def add_connection_args(parser: argparse.ArgumentParser) -> None:
         help="network controller as tcp://HOST:PORT (FluidNC, ESP32 Grbl, grblHAL telnet)",
     )
     group.add_argument(
-        "--baud", type=_positive_int, metavar="N", help="serial speed in baud (default 115200)"
+        "--baud",
+        type=_positive_int,
+        metavar="N",
+        help=f"serial speed in baud (default {DEFAULT_BAUD})",
     )
     group.add_argument(
         "--timeout",

@@ -7,6 +7,7 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
+from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.sim.profiles import FIRMWARE_PROFILES, available_machine_profiles
 from smoothjog.sim.serve import ServeOptions, serve_until_signal
 
@@ -58,8 +59,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--baud",
         type=int,
-        default=115200,
-        help="modelled wire speed in baud (default 115200, 8N1)",
+        default=DEFAULT_BAUD,
+        help=f"modelled wire speed in baud (default {DEFAULT_BAUD}, 8N1)",
     )
     parser.set_defaults(func=run)
 

@@ -1,14 +1,14 @@
 """Model Grbl 1.1h's handling of one line: the pre-parser, the G-code and `$J=` parser, its errors.
 
-This is a pure model of `protocol_main_loop`'s line filter (facts §1.1), the `$J` dispatch of
-`system_execute_line` (facts §1.2) and `gc_execute_line` (facts §1.3, §1.5), written from the facts
-and from a reading of the firmware's structure, not copied. The simulator drives it; tests of the
-jog-line builder use it as the referee.
+This is a pure model of `protocol_main_loop`'s line filter (firmware-facts §1.1), the `$J` dispatch
+of `system_execute_line` (firmware-facts §1.2) and `gc_execute_line` (firmware-facts §1.3, §1.5),
+written from the facts and from a reading of the firmware's structure, not copied. The simulator
+drives it; tests of the jog-line builder use it as the referee.
 
 Conventions: every length in `ParserState` and in results is in machine millimetres, whatever G20
 or G21 says; feeds are mm/min (except the G93 value, an inverse time in 1/min). Error codes are the
-plain ints Grbl sends after `error:`. Where the facts are silent a comment says "reading:" and
-gives the behaviour taken from the structure of `gc_execute_line`.
+plain ints Grbl sends after `error:`, named as in core/codes.py. Where the facts are silent a
+comment says "reading:" and gives the behaviour taken from the structure of `gc_execute_line`.
 
 Numbers are held as Python floats (doubles) where the firmware uses 32-bit floats, so a value can
 differ from the firmware's in the 7th or 8th significant digit; the planner's step rounding hides
@@ -22,6 +22,37 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Final, Literal
 
+from smoothjog.core.codes import (
+    ERR_BAD_NUMBER_FORMAT,
+    ERR_EXPECTED_COMMAND_LETTER,
+    ERR_GCODE_ARC_RADIUS_ERROR,
+    ERR_GCODE_AXIS_COMMAND_CONFLICT,
+    ERR_GCODE_AXIS_WORDS_EXIST,
+    ERR_GCODE_COMMAND_VALUE_NOT_INTEGER,
+    ERR_GCODE_G43_DYNAMIC_AXIS_ERROR,
+    ERR_GCODE_G53_INVALID_MOTION_MODE,
+    ERR_GCODE_INVALID_LINE_NUMBER,
+    ERR_GCODE_INVALID_TARGET,
+    ERR_GCODE_MAX_VALUE_EXCEEDED,
+    ERR_GCODE_MODAL_GROUP_VIOLATION,
+    ERR_GCODE_NO_AXIS_WORDS,
+    ERR_GCODE_NO_AXIS_WORDS_IN_PLANE,
+    ERR_GCODE_NO_OFFSETS_IN_PLANE,
+    ERR_GCODE_UNDEFINED_FEED_RATE,
+    ERR_GCODE_UNSUPPORTED_COMMAND,
+    ERR_GCODE_UNSUPPORTED_COORD_SYS,
+    ERR_GCODE_UNUSED_WORDS,
+    ERR_GCODE_VALUE_WORD_MISSING,
+    ERR_GCODE_WORD_REPEATED,
+    ERR_IDLE_ERROR,
+    ERR_INVALID_JOG_COMMAND,
+    ERR_INVALID_STATEMENT,
+    ERR_NEGATIVE_VALUE,
+    ERR_TRAVEL_EXCEEDED,
+    STATUS_OK,
+)
+from smoothjog.core.defaults import DEFAULT_ARC_TOLERANCE_MM
+from smoothjog.core.firmware import GRBL
 from smoothjog.core.units import ALL_AXES, MM_PER_INCH, Vec
 
 MotionMode = Literal["G0", "G1", "G2", "G3", "G38.2", "G38.3", "G38.4", "G38.5", "G80"]
@@ -34,8 +65,6 @@ ToolLengthMode = Literal["G43.1", "G49"]
 ProgramFlow = Literal["M0", "M2", "M30"]
 NonModal = Literal["G4", "G10", "G28", "G28.1", "G30", "G30.1", "G53", "G92", "G92.1"]
 
-#: Stored characters of one line in Grbl 1.1h (`LINE_BUFFER_SIZE` 80 minus the terminator).
-GRBL_MAX_LINE_CHARS: Final = 79
 #: Largest N word accepted (`MAX_LINE_NUMBER`).
 MAX_LINE_NUMBER: Final = 10_000_000
 #: Largest T word accepted (`MAX_TOOL_NUMBER`).
@@ -46,38 +75,7 @@ MAX_NUMBER_DIGITS: Final = 8
 N_COORDINATE_SYSTEMS: Final = 6
 #: Index of the axis the tool-length offset applies to (Z).
 TLO_AXIS: Final = 2
-#: Grbl's default `$12` arc tolerance, mm.
-DEFAULT_ARC_TOLERANCE_MM: Final = 0.002
 
-# Error codes as Grbl sends them (report.h); named here so the parser reads like the firmware.
-E_EXPECTED_LETTER: Final = 1
-E_BAD_NUMBER: Final = 2
-E_INVALID_STATEMENT: Final = 3
-E_NEGATIVE_VALUE: Final = 4
-E_NOT_IDLE: Final = 8
-E_GCODE_LOCKED: Final = 9
-E_OVERFLOW: Final = 11
-E_TRAVEL_EXCEEDED: Final = 15
-E_INVALID_JOG: Final = 16
-E_UNSUPPORTED: Final = 20
-E_MODAL_GROUP: Final = 21
-E_UNDEFINED_FEED: Final = 22
-E_NOT_INTEGER: Final = 23
-E_AXIS_COMMAND_CONFLICT: Final = 24
-E_WORD_REPEATED: Final = 25
-E_NO_AXIS_WORDS: Final = 26
-E_LINE_NUMBER: Final = 27
-E_VALUE_WORD_MISSING: Final = 28
-E_COORD_SYSTEM: Final = 29
-E_G53_MOTION: Final = 30
-E_AXIS_WORDS_EXIST: Final = 31
-E_NO_AXIS_IN_PLANE: Final = 32
-E_INVALID_TARGET: Final = 33
-E_ARC_RADIUS: Final = 34
-E_NO_OFFSETS_IN_PLANE: Final = 35
-E_UNUSED_WORDS: Final = 36
-E_G43_AXIS: Final = 37
-E_MAX_VALUE: Final = 38
 
 _JOG_PREFIX: Final = "$J="
 # Angles closer than this to zero count as "start equals end" for a full-circle arc (mc_arc).
@@ -94,7 +92,8 @@ _AXIS_NON_MODAL: Final = 1
 _AXIS_MOTION: Final = 2
 _AXIS_TLO: Final = 3
 
-# Modal groups a jog may name (facts §1.3 jog filter): non-modal (only G53), distance, units.
+# Modal groups a jog may name (firmware-facts §1.3 jog filter): non-modal (only G53), distance,
+# units.
 _JOG_ALLOWED_GROUPS: Final = frozenset({"non_modal", "distance", "units"})
 
 # Word number (and fraction x100) to mode name, so the parser never builds names from numbers.
@@ -113,7 +112,7 @@ _PROGRAM_FLOW: Final[dict[int, ProgramFlow]] = {0: "M0", 2: "M2", 30: "M30"}
 
 
 # --------------------------------------------------------------------------------------------
-# Pre-parser (facts §1.1)
+# Pre-parser (firmware-facts §1.1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,11 +123,12 @@ class Preparsed:
     overflow: bool
 
 
-def preparse(raw: bytes, *, max_line_chars: int = GRBL_MAX_LINE_CHARS) -> Preparsed:
+def preparse(raw: bytes, *, max_line_chars: int = GRBL.max_line_chars) -> Preparsed:
     """Filter one line's bytes (without its EOL) the way Grbl's main loop stores them.
 
-    Realtime bytes must already be gone (the simulator's ISR model removes them, facts §5.2).
-    On overflow `text` holds the characters stored before it; Grbl answers such a line `error:11`.
+    Realtime bytes must already be gone (the simulator's ISR model removes them, firmware-facts
+    §5.2). On overflow `text` holds the characters stored before it; Grbl answers such a line
+    `error:11`.
     """
     if b"\n" in raw or b"\r" in raw:
         raise ValueError("preparse() takes one line without its end-of-line byte")
@@ -140,7 +140,7 @@ def preparse(raw: bytes, *, max_line_chars: int = GRBL_MAX_LINE_CHARS) -> Prepar
         if dropping_rest:
             continue
         if in_parentheses:
-            # No nesting: the first ')' ends the comment (facts §1.1).
+            # No nesting: the first ')' ends the comment (firmware-facts §1.1).
             in_parentheses = byte != 0x29
             continue
         if byte <= 0x20 or byte == 0x2F:  # whitespace/control, and '/' (block delete ignored)
@@ -160,7 +160,7 @@ def preparse(raw: bytes, *, max_line_chars: int = GRBL_MAX_LINE_CHARS) -> Prepar
 
 
 # --------------------------------------------------------------------------------------------
-# `$J` dispatch (facts §1.2)
+# `$J` dispatch (firmware-facts §1.2)
 
 
 def check_jog_dispatch(line: str, state_name: str) -> int | None:
@@ -170,15 +170,15 @@ def check_jog_dispatch(line: str, state_name: str) -> int | None:
     `Idle`, `Jog` or `Hold:0` (the substate is ignored).
     """
     if state_name.split(":", 1)[0] not in ("Idle", "Jog"):
-        return E_NOT_IDLE
+        return ERR_IDLE_ERROR
     if len(line) < 3 or line[2] != "=":
         # Facts §1.2/§8.3: error 3, not the 16 the docs promise.
-        return E_INVALID_STATEMENT
+        return ERR_INVALID_STATEMENT
     return None
 
 
 # --------------------------------------------------------------------------------------------
-# Number reader (nuts_bolts.c:read_float, facts §1.3 "Number format")
+# Number reader (nuts_bolts.c:read_float, firmware-facts §1.3 "Number format")
 
 
 def read_number(text: str, start: int) -> tuple[float, int] | None:
@@ -319,7 +319,7 @@ class ParserState:
         """gc_init after a soft reset: modes to defaults, G92 and TLO cleared, stored data kept.
 
         The coordinate systems and G28/G30 live in EEPROM and survive; the position is kept here
-        and the caller syncs it to MPos (facts §3.4).
+        and the caller syncs it to MPos (firmware-facts §3.4).
         """
         n = self.n_axes
         return ParserState(
@@ -342,7 +342,7 @@ def _grbl_print_float(value: float, decimals: int) -> str:
 
 
 def gc_modes_report(state: ParserState, inches_report: bool) -> str:
-    """The `[GC:...]` line of `$G` (facts §5.3); inches_report is `$13=1` (F in in/min)."""
+    """The `[GC:...]` line of `$G` (firmware-facts §5.3); inches_report is `$13=1` (F in in/min)."""
     words = [
         state.motion,
         f"G{54 + state.wcs_index}",
@@ -373,7 +373,7 @@ def gc_modes_report(state: ParserState, inches_report: bool) -> str:
 
 @dataclass(frozen=True, slots=True)
 class TravelBox:
-    """The soft-limit box in machine mm, inclusive at both ends (facts §2)."""
+    """The soft-limit box in machine mm, inclusive at both ends (firmware-facts §2)."""
 
     min_mm: Vec
     max_mm: Vec
@@ -398,8 +398,8 @@ class Motion:
 
     `feed_mm_min` is the parser feed for a rapid (the planner uses the rapid rate instead), and is
     already converted from inverse time under G93. It can be 0 for `$J=F0` with no axis word,
-    which the planner floors to 1 mm/min (facts §4.2). `probe` names the G38 mode of a probing
-    move: it stops at contact, so the simulator must then sync the parser position to MPos.
+    which the planner floors to 1 mm/min (firmware-facts §4.2). `probe` names the G38 mode of a
+    probing move: it stops at contact, so the simulator must then sync the parser position to MPos.
     """
 
     target_mm: Vec
@@ -434,7 +434,7 @@ class ExecResult:
     @property
     def ok(self) -> bool:
         """True when Grbl would accept the line."""
-        return self.error == 0
+        return self.error == STATUS_OK
 
     @property
     def motion(self) -> Motion | None:
@@ -512,7 +512,7 @@ class _Block:
 
 def _claim_group(blk: _Block, group: str) -> None:
     if group in blk.groups:
-        raise _BlockError(E_MODAL_GROUP)
+        raise _BlockError(ERR_GCODE_MODAL_GROUP_VIOLATION)
     blk.groups.add(group)
 
 
@@ -521,13 +521,13 @@ def _g_word(blk: _Block, number: int, mantissa: int) -> None:
     group: str
     if number in (10, 28, 30, 92) and mantissa == 0:
         if blk.axis_command != _AXIS_NONE:
-            raise _BlockError(E_AXIS_COMMAND_CONFLICT)
+            raise _BlockError(ERR_GCODE_AXIS_COMMAND_CONFLICT)
         blk.axis_command = _AXIS_NON_MODAL
     if number in (4, 10, 28, 30, 53, 92):
         group = "non_modal"
         if number in (28, 30, 92):
             if mantissa not in (0, 10):
-                raise _BlockError(E_UNSUPPORTED)
+                raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
             blk.non_modal = _NON_MODAL[number, mantissa]
             mantissa = 0
         else:
@@ -535,12 +535,12 @@ def _g_word(blk: _Block, number: int, mantissa: int) -> None:
     elif number in (0, 1, 2, 3, 38, 80):
         if number != 80:
             if blk.axis_command != _AXIS_NONE:
-                raise _BlockError(E_AXIS_COMMAND_CONFLICT)
+                raise _BlockError(ERR_GCODE_AXIS_COMMAND_CONFLICT)
             blk.axis_command = _AXIS_MOTION
         group = "motion"
         if number == 38:
             if mantissa not in (20, 30, 40, 50):
-                raise _BlockError(E_UNSUPPORTED)
+                raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
             blk.motion = _PROBE[mantissa]
             mantissa = 0
         else:
@@ -556,7 +556,7 @@ def _g_word(blk: _Block, number: int, mantissa: int) -> None:
             # G91.1 (arc IJK incremental) is Grbl's only mode and does nothing; G90.1 is refused.
             group = "arc_distance"
             if mantissa != 10 or number == 90:
-                raise _BlockError(E_UNSUPPORTED)
+                raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
             mantissa = 0
     elif number in (93, 94):
         group = "feed_mode"
@@ -569,14 +569,14 @@ def _g_word(blk: _Block, number: int, mantissa: int) -> None:
     elif number in (43, 49):
         group = "tool_length"
         if blk.axis_command != _AXIS_NONE:
-            raise _BlockError(E_AXIS_COMMAND_CONFLICT)
+            raise _BlockError(ERR_GCODE_AXIS_COMMAND_CONFLICT)
         blk.axis_command = _AXIS_TLO
         if number == 49:
             blk.tool_length_mode = "G49"
         elif mantissa == 10:
             blk.tool_length_mode = "G43.1"
         else:
-            raise _BlockError(E_UNSUPPORTED)
+            raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
         # Reading: the firmware clears the fraction here for G49 too, so G49.5 acts as G49.
         mantissa = 0
     elif 54 <= number <= 59:
@@ -585,21 +585,21 @@ def _g_word(blk: _Block, number: int, mantissa: int) -> None:
     elif number == 61:
         group = "path_control"
         if mantissa != 0:
-            raise _BlockError(E_UNSUPPORTED)
+            raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
     else:
         # Reading: the firmware holds the number in 8 bits, so G256 and up may alias to low
         # codes there; this model reports them all as unsupported.
-        raise _BlockError(E_UNSUPPORTED)
+        raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
     # A negative fraction wraps to a large unsigned value in the firmware, so any fraction fails.
     if mantissa != 0:
-        raise _BlockError(E_NOT_INTEGER)
+        raise _BlockError(ERR_GCODE_COMMAND_VALUE_NOT_INTEGER)
     _claim_group(blk, group)
 
 
 def _m_word(blk: _Block, number: int, mantissa: int, *, m7: bool) -> None:
     """Apply one M word (STEP 2, 'M' case)."""
     if mantissa != 0:
-        raise _BlockError(E_NOT_INTEGER)
+        raise _BlockError(ERR_GCODE_COMMAND_VALUE_NOT_INTEGER)
     group: str
     if number in (0, 1, 2, 30):
         group = "stopping"
@@ -617,7 +617,7 @@ def _m_word(blk: _Block, number: int, mantissa: int, *, m7: bool) -> None:
         else:
             blk.coolant_flood = blk.coolant_mist = False
     else:
-        raise _BlockError(E_UNSUPPORTED)
+        raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
     _claim_group(blk, "m_" + group)
 
 
@@ -642,18 +642,18 @@ def _value_word(blk: _Block, letter: str, value: float, axes: tuple[str, ...]) -
         blk.s = value
     elif letter == "T":
         if value > MAX_TOOL_NUMBER:
-            raise _BlockError(E_MAX_VALUE)
+            raise _BlockError(ERR_GCODE_MAX_VALUE_EXCEEDED)
         blk.t = whole
     elif letter in axes:
         index = axes.index(letter)
         blk.xyz[index] = value
         blk.axis_words.add(index)
     else:
-        raise _BlockError(E_UNSUPPORTED)
+        raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
     if letter in blk.words:
-        raise _BlockError(E_WORD_REPEATED)
+        raise _BlockError(ERR_GCODE_WORD_REPEATED)
     if letter in "FNPST" and value < 0.0:
-        raise _BlockError(E_NEGATIVE_VALUE)
+        raise _BlockError(ERR_NEGATIVE_VALUE)
     blk.words.add(letter)
 
 
@@ -663,10 +663,10 @@ def _parse_words(text: str, blk: _Block, axes: tuple[str, ...], *, m7: bool) -> 
     while i < len(text):
         letter = text[i]
         if not "A" <= letter <= "Z":
-            raise _BlockError(E_EXPECTED_LETTER)
+            raise _BlockError(ERR_EXPECTED_COMMAND_LETTER)
         number = read_number(text, i + 1)
         if number is None:
-            raise _BlockError(E_BAD_NUMBER)
+            raise _BlockError(ERR_BAD_NUMBER_FORMAT)
         value, i = number
         whole = math.trunc(value)
         mantissa = _round_half_away(100.0 * (value - whole))
@@ -700,20 +700,20 @@ def _check_arc(blk: _Block, st: ParserState) -> _Arc:
     """STEP 3 [20] for G2/G3: the arc error checks; returns the centre for execution."""
     a0, a1, _ = _plane_axes(blk.plane)
     if not blk.axis_words:
-        raise _BlockError(E_NO_AXIS_WORDS)
+        raise _BlockError(ERR_GCODE_NO_AXIS_WORDS)
     if a0 not in blk.axis_words and a1 not in blk.axis_words:
-        raise _BlockError(E_NO_AXIS_IN_PLANE)
+        raise _BlockError(ERR_GCODE_NO_AXIS_WORDS_IN_PLANE)
     dx = blk.xyz[a0] - st.position_mm[a0]
     dy = blk.xyz[a1] - st.position_mm[a1]
     clockwise = blk.motion == "G2"
     if "R" in blk.words:
         blk.words.discard("R")
         if list(st.position_mm) == blk.xyz:
-            raise _BlockError(E_INVALID_TARGET)
+            raise _BlockError(ERR_GCODE_INVALID_TARGET)
         r = blk.r * MM_PER_INCH if blk.units == "G20" else blk.r
         under_root = 4.0 * r * r - dx * dx - dy * dy
         if under_root < 0:
-            raise _BlockError(E_ARC_RADIUS)
+            raise _BlockError(ERR_GCODE_ARC_RADIUS_ERROR)
         # Centre on the perpendicular bisector of the chord; the side follows direction and the
         # sign of R (negative R asks for the arc longer than half a circle).
         h = -math.sqrt(under_root) / math.hypot(dx, dy)
@@ -724,7 +724,7 @@ def _check_arc(blk: _Block, st: ParserState) -> _Arc:
             r = -r
         return _Arc((0.5 * (dx - dy * h), 0.5 * (dy + dx * h)), r, clockwise)
     if a0 not in blk.ijk_words and a1 not in blk.ijk_words:
-        raise _BlockError(E_NO_OFFSETS_IN_PLANE)
+        raise _BlockError(ERR_GCODE_NO_OFFSETS_IN_PLANE)
     blk.words -= {"I", "J", "K"}
     scale = MM_PER_INCH if blk.units == "G20" else 1.0
     # IJK are indexed X, Y, Z like the axes, so the plane picks two of them.
@@ -736,7 +736,7 @@ def _check_arc(blk: _Block, st: ParserState) -> _Arc:
     if delta_r > _ARC_RADIUS_SLACK_MM and (
         delta_r > _ARC_RADIUS_MAX_DIFF_MM or delta_r > _ARC_RADIUS_REL * radius
     ):
-        raise _BlockError(E_INVALID_TARGET)
+        raise _BlockError(ERR_GCODE_INVALID_TARGET)
     return _Arc((off0, off1), radius, clockwise)
 
 
@@ -818,7 +818,7 @@ def _execute(
     n = st.n_axes
     blk = _Block.from_state(st)
     if jog:
-        # STEP 1: a jog is G1 under G94 whatever the modal state says (facts §1.3).
+        # STEP 1: a jog is G1 under G94 whatever the modal state says (firmware-facts §1.3).
         blk.motion = "G1"
         blk.feed_mode = "G94"
     _parse_words(text, blk, axes, m7=m7)
@@ -827,12 +827,12 @@ def _execute(
     if blk.axis_words and blk.axis_command == _AXIS_NONE:
         blk.axis_command = _AXIS_MOTION
     if "N" in blk.words and blk.n > MAX_LINE_NUMBER:
-        raise _BlockError(E_LINE_NUMBER)
+        raise _BlockError(ERR_GCODE_INVALID_LINE_NUMBER)
 
     # [2]/[3] Feed mode and feed rate.
     if jog:
         if "F" not in blk.words:
-            raise _BlockError(E_UNDEFINED_FEED)
+            raise _BlockError(ERR_GCODE_UNDEFINED_FEED_RATE)
         if blk.units == "G20":
             blk.f *= MM_PER_INCH
     elif blk.feed_mode == "G93":
@@ -841,7 +841,7 @@ def _execute(
             and blk.motion not in ("G80", "G0")
             and "F" not in blk.words
         ):
-            raise _BlockError(E_UNDEFINED_FEED)
+            raise _BlockError(ERR_GCODE_UNDEFINED_FEED_RATE)
         # Under G93 F is an inverse time for this block only; it is never carried over.
     elif st.feed_mode == "G94":
         if "F" in blk.words:
@@ -858,7 +858,7 @@ def _execute(
     # [10] Dwell needs P.
     if blk.non_modal == "G4":
         if "P" not in blk.words:
-            raise _BlockError(E_VALUE_WORD_MISSING)
+            raise _BlockError(ERR_GCODE_VALUE_WORD_MISSING)
         blk.words.discard("P")
 
     # [12] Axis values to mm.
@@ -872,7 +872,7 @@ def _execute(
         and blk.tool_length_mode == "G43.1"
         and blk.axis_words != {TLO_AXIS}
     ):
-        raise _BlockError(E_G43_AXIS)
+        raise _BlockError(ERR_GCODE_G43_DYNAMIC_AXIS_ERROR)
 
     # [15] The coordinate system this block works in.
     block_wcs = st.coord_systems_mm[blk.wcs_index]
@@ -884,17 +884,17 @@ def _execute(
     home_target: Vec | None = None
     if blk.non_modal == "G10":
         if not blk.axis_words:
-            raise _BlockError(E_NO_AXIS_WORDS)
+            raise _BlockError(ERR_GCODE_NO_AXIS_WORDS)
         # Reading: the firmware's test is "neither P nor L given"; one of them alone passes here
         # (a missing L then fails as unsupported, a missing P means P0, the active system).
         if "P" not in blk.words and "L" not in blk.words:
-            raise _BlockError(E_VALUE_WORD_MISSING)
+            raise _BlockError(ERR_GCODE_VALUE_WORD_MISSING)
         p_index = math.trunc(blk.p)
         if p_index > N_COORDINATE_SYSTEMS:
-            raise _BlockError(E_COORD_SYSTEM)
+            raise _BlockError(ERR_GCODE_UNSUPPORTED_COORD_SYS)
         # Only L2 (without R) and L20 exist.
         if blk.l_word != 20 and (blk.l_word != 2 or "R" in blk.words):
-            raise _BlockError(E_UNSUPPORTED)
+            raise _BlockError(ERR_GCODE_UNSUPPORTED_COMMAND)
         blk.words -= {"L", "P"}
         g10_index = p_index - 1 if p_index > 0 else blk.wcs_index
         stored = list(st.coord_systems_mm[g10_index])
@@ -909,7 +909,7 @@ def _execute(
         g10_values = tuple(stored)
     elif blk.non_modal == "G92":
         if not blk.axis_words:
-            raise _BlockError(E_NO_AXIS_WORDS)
+            raise _BlockError(ERR_GCODE_NO_AXIS_WORDS)
         offset = list(st.g92_offset_mm)
         for i in blk.axis_words:
             # Choose the G92 offset that makes the current position read as the value.
@@ -919,8 +919,9 @@ def _execute(
         g92_values = tuple(offset)
     else:
         if blk.axis_command != _AXIS_TLO and blk.axis_words:
-            # STEP 3 [19] default branch (facts §1.5). With no axis word at all nothing here runs
-            # and the target stays at the zeroed initial value: machine 0 for a jog (facts §1.3).
+            # STEP 3 [19] default branch (firmware-facts §1.5). With no axis word at all nothing
+            # here runs and the target stays at the zeroed initial value: machine 0 for a jog
+            # (firmware-facts §1.3).
             for i in range(n):
                 if i not in blk.axis_words:
                     blk.xyz[i] = st.position_mm[i]
@@ -943,20 +944,20 @@ def _execute(
                 home_target = stored_home
                 blk.axis_command = _AXIS_NONE
         elif blk.non_modal == "G53" and blk.motion not in ("G0", "G1"):
-            raise _BlockError(E_G53_MOTION)
+            raise _BlockError(ERR_GCODE_G53_INVALID_MOTION_MODE)
 
     # [20] Motion mode checks.
     arc: _Arc | None = None
     if blk.motion == "G80":
         if blk.axis_words:
-            raise _BlockError(E_AXIS_WORDS_EXIST)
+            raise _BlockError(ERR_GCODE_AXIS_WORDS_EXIST)
     elif blk.axis_command == _AXIS_MOTION:
         if blk.motion == "G0":
             if not blk.axis_words:
                 blk.axis_command = _AXIS_NONE
         else:
             if blk.f == 0.0:
-                raise _BlockError(E_UNDEFINED_FEED)
+                raise _BlockError(ERR_GCODE_UNDEFINED_FEED_RATE)
             if blk.motion == "G1":
                 if not blk.axis_words:
                     blk.axis_command = _AXIS_NONE
@@ -964,29 +965,30 @@ def _execute(
                 arc = _check_arc(blk, st)
             else:  # G38.x
                 if not blk.axis_words:
-                    raise _BlockError(E_NO_AXIS_WORDS)
+                    raise _BlockError(ERR_GCODE_NO_AXIS_WORDS)
                 if list(st.position_mm) == blk.xyz:
-                    raise _BlockError(E_INVALID_TARGET)
+                    raise _BlockError(ERR_GCODE_INVALID_TARGET)
 
-    # Unused words: in a jog only N and F are "used" (so S and T give 36, facts §1.3).
+    # Unused words: in a jog only N and F are "used" (so S and T give 36, firmware-facts §1.3).
     blk.words -= {"N", "F"} if jog else {"N", "F", "S", "T"}
     if blk.axis_command != _AXIS_NONE:
         blk.words -= set(axes)
     if blk.words:
-        raise _BlockError(E_UNUSED_WORDS)
+        raise _BlockError(ERR_GCODE_UNUSED_WORDS)
 
     target: Vec = tuple(blk.xyz)
     if jog:
-        # Jog filter (facts §1.3 step 6), then the travel check of jog_execute (facts §2).
+        # Jog filter (firmware-facts §1.3 step 6), then the travel check of jog_execute
+        # (firmware-facts §2).
         if not blk.groups <= _JOG_ALLOWED_GROUPS:
-            raise _BlockError(E_INVALID_JOG)
+            raise _BlockError(ERR_INVALID_JOG_COMMAND)
         if blk.non_modal not in (None, "G53"):
-            raise _BlockError(E_INVALID_JOG)
+            raise _BlockError(ERR_INVALID_JOG_COMMAND)
         if envelope is not None and not envelope.contains(target):
-            raise _BlockError(E_TRAVEL_EXCEEDED)
+            raise _BlockError(ERR_TRAVEL_EXCEEDED)
         # Only the parser position moves; every mode and the stored F stay as they were (§1.5).
         return ExecResult(
-            error=0,
+            error=STATUS_OK,
             state=replace(st, position_mm=target),
             motions=(Motion(target, blk.f, rapid=False, is_jog=True, line_number=blk.n),),
         )
@@ -1132,7 +1134,7 @@ def _run(
         g30_mm=g30,
     )
     return ExecResult(
-        error=0,
+        error=STATUS_OK,
         state=new_state,
         motions=tuple(motions),
         dwell_s=blk.p if blk.non_modal == "G4" else None,

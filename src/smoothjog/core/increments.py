@@ -2,7 +2,8 @@
 
 The jogging doc's rule `dt > v²/(2a(N−1))` mixes units: v²/(2a) is a *distance* (the stopping
 distance), which must fit in the N−1 blocks queued behind the executing one. The correct rules are
-`s = v·dt ≥ v²/(2a(N−1))` for the block length and `dt ≥ v/(2a(N−1))` for its duration (facts §4.3).
+`s = v·dt ≥ v²/(2a(N−1))` for the block length and `dt ≥ v/(2a(N−1))` for its duration
+(firmware-facts §4.3).
 
 Every function here is pure arithmetic in mm, mm/s, mm/s² and s.
 """
@@ -35,9 +36,9 @@ def vector_move(
 ) -> VectorMove | None:
     """The move Grbl makes for a requested per-axis velocity, or None for no motion.
 
-    The speed is the vector length of the request, capped the way Grbl caps a block (facts §4.2:
-    the smallest max_i/|u_i| over moving axes), so the direction is kept and a diagonal never runs
-    faster than asked. The acceleration is Grbl's along that direction.
+    The speed is the vector length of the request, capped the way Grbl caps a block (firmware-facts
+    §4.2: the smallest max_i/|u_i| over moving axes), so the direction is kept and a diagonal never
+    runs faster than asked. The acceleration is Grbl's along that direction.
     """
     speed = norm(velocity_mm_s)
     if speed <= 0.0:
@@ -76,9 +77,9 @@ def committed_s(block_s: float, *, segment_s: float = 0.010, segments: int = 5) 
     """Longest time the firmware's prepared segments can cover when every block lasts block_s.
 
     Grbl cuts each block into segments of at most segment_s and ends a segment at the end of its
-    block (facts §4.3, st_prep_buffer), and keeps `segments` of them prepared (facts §4.1). With
-    blocks of 10.5 ms the pattern is 10, 0.5, 10, 0.5, ... so five segments hold at most 31 ms,
-    not 50: short blocks shorten what a cancel cannot take back.
+    block (firmware-facts §4.3, st_prep_buffer), and keeps `segments` of them prepared
+    (firmware-facts §4.1). With blocks of 10.5 ms the pattern is 10, 0.5, 10, 0.5, ... so five
+    segments hold at most 31 ms, not 50: short blocks shorten what a cancel cannot take back.
     """
     if block_s <= 0.0:
         return segments * segment_s
@@ -99,7 +100,7 @@ def junction_speed_sqr(
     accel_mm_s2: Sequence[float],
     deviation_mm: float,
 ) -> float:
-    """Grbl's junction-deviation limit (squared speed) between two moves (facts §4.3).
+    """Grbl's junction-deviation limit (squared speed) between two moves (firmware-facts §4.3).
 
     0 for a full reversal, 1e38 (no limit) straight on; otherwise a·δ·s/(1−s) with s the sine
     of half the junction angle and a the per-axis-limited acceleration along u − u_prev.

@@ -1,14 +1,14 @@
 """Build `$J=` lines that Grbl accepts and that mean exactly what the caller asked for.
 
 Every line names its units (G21/G20) and its distance mode (G91/G90) or G53, so whatever modal
-state the controller is in cannot change its meaning (facts §1.5). It always has at least one
-axis word, so the firmware's "no axis word goes to machine zero" flaw (facts §1.3) cannot fire.
-It always has F, since a jog's F is never modal. Numbers have no exponent and at most 8 digits,
-because Grbl's reader drops any digit past the 8th (facts §1.3 "Number format").
+state the controller is in cannot change its meaning (firmware-facts §1.5). It always has at least
+one axis word, so the firmware's "no axis word goes to machine zero" flaw (firmware-facts §1.3)
+cannot fire. It always has F, since a jog's F is never modal. Numbers have no exponent and at most 8
+digits, because Grbl's reader drops any digit past the 8th (firmware-facts §1.3 "Number format").
 
 Decimals kept: 4 for mm (0.1 µm, far below one step at any real steps/mm, so sub-step
-increments still add up over a series of jogs, facts §1.5) and 5 for inches (0.25 µm). A feed
-keeps 3 decimals in mm/min and 4 in in/min. A value too large for 8 digits at that precision
+increments still add up over a series of jogs, firmware-facts §1.5) and 5 for inches (0.25 µm). A
+feed keeps 3 decimals in mm/min and 4 in in/min. A value too large for 8 digits at that precision
 loses decimals, never integer digits.
 """
 
@@ -19,8 +19,10 @@ from collections.abc import Mapping, Sequence
 from decimal import ROUND_HALF_EVEN, Decimal
 from typing import Final, Literal
 
+from smoothjog.core.codes import ERR_GCODE_UNDEFINED_FEED_RATE, ERR_NEGATIVE_VALUE, ERR_OVERFLOW
 from smoothjog.core.errors import JogBuildError
-from smoothjog.core.gcode import GRBL_MAX_LINE_CHARS, MAX_NUMBER_DIGITS
+from smoothjog.core.firmware import GRBL
+from smoothjog.core.gcode import MAX_NUMBER_DIGITS
 from smoothjog.core.units import ALL_AXES, GRBL_AXES, MM_PER_INCH
 
 JogMode = Literal["G91", "G90", "G53"]
@@ -86,7 +88,7 @@ def build_jog_line(
     mode: JogMode = "G91",
     units: JogUnits = "G21",
     axes: Sequence[str] = GRBL_AXES,
-    max_line_chars: int = GRBL_MAX_LINE_CHARS,
+    max_line_chars: int = GRBL.max_line_chars,
 ) -> str:
     """The `$J=` line (without newline) for moves in mm at feed_mm_min, or JogBuildError.
 
@@ -121,7 +123,8 @@ def build_jog_line(
     if not math.isfinite(feed_mm_min) or feed_mm_min <= 0:
         raise JogBuildError(
             f"jog feed {feed_mm_min!r} mm/min is not a positive number; Grbl needs F > 0 "
-            "(error:22 for F0, error:4 for a negative F)"
+            f"(error:{ERR_GCODE_UNDEFINED_FEED_RATE} for F0, error:{ERR_NEGATIVE_VALUE} for a "
+            "negative F)"
         )
 
     inches = units == "G20"
@@ -145,12 +148,13 @@ def build_jog_line(
     )
     if feed_text == "0":
         raise JogBuildError(
-            f"jog feed {feed_mm_min!r} mm/min rounds to F0, which Grbl refuses (error:22)"
+            f"jog feed {feed_mm_min!r} mm/min rounds to F0, which Grbl refuses "
+            f"(error:{ERR_GCODE_UNDEFINED_FEED_RATE})"
         )
     line = f"$J={units}{mode}{''.join(words)}F{feed_text}"
     if len(line) > max_line_chars:
         raise JogBuildError(
             f"the jog line {line!r} has {len(line)} characters but the controller stores at most "
-            f"{max_line_chars} (error:11); jog fewer axes at once"
+            f"{max_line_chars} (error:{ERR_OVERFLOW}); jog fewer axes at once"
         )
     return line

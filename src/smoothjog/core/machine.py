@@ -1,8 +1,8 @@
 """The machine model: what the host knows of the controller, built only from parsed responses.
 
 Everything here is held in machine millimetres (positions, offsets, envelope) and mm/min (feeds),
-whatever `$13` says: reports in inches are converted on the way in (facts §5.5). The model is
-changed only by `MachineModel.apply(response)` and a few pure setters, so the handshake, the
+whatever `$13` says: reports in inches are converted on the way in (firmware-facts §5.5). The model
+is changed only by `MachineModel.apply(response)` and a few pure setters, so the handshake, the
 session and the tests all drive it the same way.
 """
 
@@ -12,7 +12,28 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
+from smoothjog.core.defaults import (
+    ACCEL_SETTING,
+    AXIS_GROUP_SETTINGS,
+    DEFAULT_ACCEL_MM_S2,
+    DEFAULT_AXES,
+    DEFAULT_JUNCTION_DEVIATION_MM,
+    DEFAULT_MAX_RATE_MM_MIN,
+    DEFAULT_MAX_TRAVEL_MM,
+    DEFAULT_PULL_OFF_MM,
+    DEFAULT_STATUS_MASK,
+    DEFAULT_STEPS_PER_MM,
+    MAX_RATE_SETTING,
+    MAX_TRAVEL_SETTING,
+    STEPS_PER_MM_SETTING,
+)
 from smoothjog.core.errors import CoreError
+from smoothjog.core.firmware import (
+    FirmwareName,
+    for_model,
+    named_by_info,
+    named_by_version,
+)
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.responses import (
     AlarmReply,
@@ -20,7 +41,6 @@ from smoothjog.core.responses import (
     BuildOptions,
     ErrorReply,
     Feedback,
-    Firmware,
     GcodeModes,
     HelpReply,
     Message,
@@ -34,22 +54,6 @@ from smoothjog.core.responses import (
 )
 from smoothjog.core.units import ALL_AXES, Vec, inch_to_mm
 
-# Grbl 1.1h DEFAULTS_GENERIC (facts §0), used for any setting the controller has not reported.
-DEFAULT_STATUS_MASK = 1
-DEFAULT_JUNCTION_DEVIATION_MM = 0.010
-DEFAULT_PULL_OFF_MM = 1.0
-DEFAULT_STEPS_PER_MM = 250.0
-DEFAULT_MAX_RATE_MM_MIN = 500.0
-DEFAULT_ACCEL_MM_S2 = 10.0
-DEFAULT_MAX_TRAVEL_MM = 200.0
-DEFAULT_AXES = 3
-
-# Planner blocks and RX bytes when no [OPT:] line is known (facts §4.1, §5.1, §7).
-_DEFAULT_PLANNER_BLOCKS: Mapping[Firmware, int] = {"grbl": 15, "grblhal": 100, "fluidnc": 16}
-_DEFAULT_RX_BYTES: Mapping[Firmware, int] = {"grbl": 128, "grblhal": 1024, "fluidnc": 256}
-
-# Per-axis setting groups: $100+i steps/mm, $110+i mm/min, $120+i mm/s², $130+i mm (facts §0).
-_STEPS_BASE, _RATE_BASE, _ACCEL_BASE, _TRAVEL_BASE = 100, 110, 120, 130
 _MAX_AXES = len(ALL_AXES)
 
 
@@ -110,7 +114,8 @@ def _letter(index: int) -> str:
 
 @dataclass(frozen=True, slots=True)
 class Settings:
-    """The `$$` settings a jog host needs, typed; unknown ones take the 1.1h defaults (facts §0)."""
+    """The `$$` settings a jog host needs, typed; unknown ones take the 1.1h defaults
+    (firmware-facts §0)."""
 
     status_mask: int = DEFAULT_STATUS_MASK  # $10: bit0 MPos (else WPos), bit1 Bf
     junction_deviation_mm: float = DEFAULT_JUNCTION_DEVIATION_MM  # $11
@@ -118,7 +123,7 @@ class Settings:
     soft_limits: bool = False  # $20
     hard_limits: bool = False  # $21
     homing: bool = False  # $22
-    homing_dir_mask: int = 0  # $23: bit i set = axis i homes toward negative (facts §2)
+    homing_dir_mask: int = 0  # $23: bit i set = axis i homes toward negative (firmware-facts §2)
     pull_off_mm: float = DEFAULT_PULL_OFF_MM  # $27
     steps_per_mm: Vec = (DEFAULT_STEPS_PER_MM,) * DEFAULT_AXES
     max_rate_mm_min: Vec = (DEFAULT_MAX_RATE_MM_MIN,) * DEFAULT_AXES
@@ -163,7 +168,7 @@ class Settings:
                 values[number] = number_value
 
         def flag(number: int) -> bool:
-            # grblHAL packs more flags into $20/$22 (facts §7); bit 0 is still the enable.
+            # grblHAL packs more flags into $20/$22 (firmware-facts §7); bit 0 is still the enable.
             return int(values.get(number, 0.0)) & 1 == 1
 
         n_axes = _axis_count(values)
@@ -180,10 +185,10 @@ class Settings:
             homing=flag(22),
             homing_dir_mask=int(values.get(23, 0.0)),
             pull_off_mm=values.get(27, DEFAULT_PULL_OFF_MM),
-            steps_per_mm=group(_STEPS_BASE, DEFAULT_STEPS_PER_MM),
-            max_rate_mm_min=group(_RATE_BASE, DEFAULT_MAX_RATE_MM_MIN),
-            accel_mm_s2=group(_ACCEL_BASE, DEFAULT_ACCEL_MM_S2),
-            max_travel_mm=group(_TRAVEL_BASE, DEFAULT_MAX_TRAVEL_MM),
+            steps_per_mm=group(STEPS_PER_MM_SETTING, DEFAULT_STEPS_PER_MM),
+            max_rate_mm_min=group(MAX_RATE_SETTING, DEFAULT_MAX_RATE_MM_MIN),
+            accel_mm_s2=group(ACCEL_SETTING, DEFAULT_ACCEL_MM_S2),
+            max_travel_mm=group(MAX_TRAVEL_SETTING, DEFAULT_MAX_TRAVEL_MM),
             raw=tuple(sorted(raw.items())),
             named=named,
         )
@@ -206,9 +211,9 @@ class Settings:
 def _axis_count(values: Mapping[int, float]) -> int:
     """Axes covered by the per-axis groups: the longest run from $100, $110, $120 or $130."""
     longest = 0
-    for base in (_STEPS_BASE, _RATE_BASE, _ACCEL_BASE, _TRAVEL_BASE):
+    for base in AXIS_GROUP_SETTINGS:
         count = 0
-        # grblHAL and FluidNC number up to 9 axes as $100..$108 (facts §7).
+        # grblHAL and FluidNC number up to 9 axes as $100..$108 (firmware-facts §7).
         while count < _MAX_AXES and base + count in values:
             count += 1
         longest = max(longest, count)
@@ -247,7 +252,7 @@ _WCS_WORDS = frozenset({"G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.
 class MachineModel:
     """What the host knows of the controller; change it only through apply() and the setters."""
 
-    firmware: Firmware = "grbl"
+    firmware: FirmwareName = "grbl"
     version: str | None = None
     build: str | None = None
     option_codes: str = ""
@@ -300,7 +305,7 @@ class MachineModel:
 
     @property
     def homing_force_set_origin(self) -> bool:
-        """Built with HOMING_FORCE_SET_ORIGIN: option letter `Z` in `[OPT:]` (facts §2)."""
+        """Built with HOMING_FORCE_SET_ORIGIN: option letter `Z` in `[OPT:]` (firmware-facts §2)."""
         return "Z" in self.option_codes
 
     @property
@@ -308,15 +313,15 @@ class MachineModel:
         """Planner size as the firmware states it: [OPT:] when known, else its default."""
         if self._opt_blocks is not None:
             return self._opt_blocks
-        return _DEFAULT_PLANNER_BLOCKS[self.firmware]
+        return for_model(self).planner_blocks
 
     @property
     def planner_usable_blocks(self) -> int:
         """Blocks a host can fill: what `Bf` shows when the planner is empty."""
         # Grbl's [OPT:] already counts usable blocks (15 of a 16-slot ring) and grblHAL uses all
-        # of its blocks; FluidNC's Bf is planner_blocks - 1 (facts §7). A larger Bf seen in a
-        # report is ground truth and wins.
-        stated = self.planner_blocks - 1 if self.firmware == "fluidnc" else self.planner_blocks
+        # of its blocks; FluidNC's Bf is planner_blocks - 1 (firmware-facts §7), which the table's
+        # hidden blocks say. A larger Bf seen in a report is ground truth and wins.
+        stated = self.planner_blocks - for_model(self).planner_blocks_hidden
         return max(stated, self._max_planner_free_seen)
 
     @property
@@ -324,7 +329,7 @@ class MachineModel:
         """The controller's line-receive buffer in bytes: [OPT:] when known, else its default."""
         if self._opt_rx_bytes is not None:
             return self._opt_rx_bytes
-        return _DEFAULT_RX_BYTES[self.firmware]
+        return for_model(self).rx_buffer_bytes
 
     def axis_max_rate_mm_min(self) -> Vec:
         """`$110...` per axis in mm/min."""
@@ -358,10 +363,10 @@ class MachineModel:
 
     def looks_unhomed(self) -> bool:
         """True when soft limits are on and MPos is exactly 0 on every axis (power-up, $X)."""
-        # Grbl keeps no "homed" flag (facts §2): after power-up and $X, MPos is 0,0,0, the corner
-        # of the default envelope, where every + jog gets error:15. A homed default build sits at
-        # -$27 or -$13x+$27 instead. With HOMING_FORCE_SET_ORIGIN a homed machine is at 0 too,
-        # so the two cannot be told apart and this says False rather than cry wolf.
+        # Grbl keeps no "homed" flag (firmware-facts §2): after power-up and $X, MPos is 0,0,0, the
+        # corner of the default envelope, where every + jog gets error:15. A homed default build
+        # sits at -$27 or -$13x+$27 instead. With HOMING_FORCE_SET_ORIGIN a homed machine is at 0
+        # too, so the two cannot be told apart and this says False rather than cry wolf.
         if not self.settings.soft_limits or self.homing_force_set_origin:
             return False
         return self.mpos_mm is not None and all(c == 0.0 for c in self.mpos_mm)
@@ -411,18 +416,16 @@ class MachineModel:
             # The banner's version is the cleaner one; take $I's only when no banner was seen.
             self.version = self.version or response.version
             self.build = response.build or None
-            if "FluidNC" in response.version:
-                self.firmware = "fluidnc"
+            self.firmware = named_by_version(response.version) or self.firmware
         elif isinstance(response, Feedback):
             # grblHAL's `$I` names itself; its compatibility banner may have said plain "Grbl".
-            if response.text.lower() == "firmware:grblhal":
-                self.firmware = "grblhal"
+            self.firmware = named_by_info(response.text) or self.firmware
         elif isinstance(response, GcodeModes):
             self._apply_modes(response)
         elif isinstance(response, Parameter):
             self._apply_parameter(response)
         elif isinstance(response, AlarmReply):
-            # An ALARM:N always leaves the controller in Alarm (facts §2, §3.4, §5.6).
+            # An ALARM:N always leaves the controller in Alarm (firmware-facts §2, §3.4, §5.6).
             self.last_alarm = response.code
             self.state, self.substate = "Alarm", None
         elif isinstance(response, ErrorReply):
@@ -435,7 +438,8 @@ class MachineModel:
             self._talked = True
 
     def _to_mm(self, value: float) -> float:
-        """A report-unit length or rate in mm (or mm/min): $13=1 reports inches (facts §5.5)."""
+        """A report-unit length or rate in mm (or mm/min): $13=1 reports inches (firmware-facts
+        §5.5)."""
         # Adding 0.0 turns Grbl's rounded "-0.000" into a plain zero.
         return (inch_to_mm(value) if self.settings.report_inches else value) + 0.0
 
@@ -451,7 +455,8 @@ class MachineModel:
         mpos = self._vec_to_mm(report.mpos) if report.mpos is not None else None
         wpos = self._vec_to_mm(report.wpos) if report.wpos is not None else None
         wco = self.wco_mm
-        # WPos = MPos - WCO (facts §5.4); a frame is derived only when the axis counts agree.
+        # WPos = MPos - WCO (firmware-facts §5.4); a frame is derived only when the axis counts
+        # agree.
         if mpos is not None and wpos is None and wco is not None and len(wco) == len(mpos):
             wpos = tuple(m - o + 0.0 for m, o in zip(mpos, wco, strict=True))
         if wpos is not None and mpos is None and wco is not None and len(wco) == len(wpos):
@@ -466,7 +471,8 @@ class MachineModel:
             self.buffer = report.buffer
             self._max_planner_free_seen = max(self._max_planner_free_seen, report.buffer[0])
         self.line_number = report.line_number
-        # Pn is printed only while some pin is triggered, so its absence means none (facts §5.4).
+        # Pn is printed only while some pin is triggered, so its absence means none (firmware-facts
+        # §5.4).
         self.pins = report.pins or ""
         if report.overrides is not None:
             self.overrides = report.overrides
@@ -480,8 +486,8 @@ class MachineModel:
         self.firmware = banner.firmware
         self.version = banner.version
         # After a reset: state unknown, buffers empty, parser at defaults with G92 and TLO
-        # cleared, overrides 100 %; MPos is kept (facts §3.4). WCO changed with G92/TLO, and the
-        # first report after reset carries it again (facts §5.4), so forget ours.
+        # cleared, overrides 100 %; MPos is kept (firmware-facts §3.4). WCO changed with G92/TLO,
+        # and the first report after reset carries it again (firmware-facts §5.4), so forget ours.
         self.state, self.substate = None, None
         self.wpos_mm, self.wco_mm = None, None
         self.buffer = None

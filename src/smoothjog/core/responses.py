@@ -1,8 +1,8 @@
 """Parse every line a Grbl-family controller sends into a typed, frozen response; never raises.
 
-The forms follow facts §5.3 (replies and push messages) and §5.4 (status reports), with the
-grblHAL and FluidNC variants of facts §7. Numbers stay in the units the controller reported them
-in (mm, or inches when `$13=1`); converting them is the machine model's job, not the parser's.
+The forms follow firmware-facts §5.3 (replies and push messages) and §5.4 (status reports), with the
+grblHAL and FluidNC variants of firmware-facts §7. Numbers stay in the units the controller reported
+them in (mm, or inches when `$13=1`); converting them is the machine model's job, not the parser's.
 Anything garbled, truncated or not UTF-8 becomes `Unparsed` so a noisy link can never crash a
 caller.
 """
@@ -11,23 +11,21 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Literal
 
 from smoothjog.core.errors import CoreError
-
-Firmware = Literal["grbl", "grblhal", "fluidnc"]
+from smoothjog.core.firmware import FirmwareName
 
 #: Status-report states known to the three firmwares; an unknown word is still accepted.
 KNOWN_STATES: frozenset[str] = frozenset(
     {"Idle", "Run", "Hold", "Jog", "Alarm", "Door", "Check", "Home", "Sleep", "Tool"}
 )
 
-# Grbl prints numbers as optional sign, digits, optional point and decimals (facts §1.3 number
-# format, report side in print.c). `float()` alone would also take "nan", "inf", "1e3" and "1_0",
-# none of which a controller sends, so a stricter pattern keeps garbage out.
+# Grbl prints numbers as optional sign, digits, optional point and decimals (firmware-facts §1.3
+# number format, report side in print.c). `float()` alone would also take "nan", "inf", "1e3" and
+# "1_0", none of which a controller sends, so a stricter pattern keeps garbage out.
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
 _INT = re.compile(r"[+-]?\d+")
-_MAX_AXES = 9  # X Y Z A B C U V W, FluidNC's maximum (facts §7)
+_MAX_AXES = 9  # X Y Z A B C U V W, FluidNC's maximum (firmware-facts §7)
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,7 +42,7 @@ class ErrorReply:
 
 @dataclass(frozen=True, slots=True)
 class AlarmReply:
-    """`ALARM:N`: the controller entered alarm N (facts §5.6)."""
+    """`ALARM:N`: the controller entered alarm N (firmware-facts §5.6)."""
 
     code: int
 
@@ -53,7 +51,7 @@ class AlarmReply:
 class Banner:
     """The welcome line after power-up or reset: all buffers empty, parser at defaults."""
 
-    firmware: Firmware
+    firmware: FirmwareName
     version: str
     raw: str
 
@@ -66,7 +64,7 @@ class StatusReport:
     substate: int | None
     mpos: tuple[float, ...] | None
     wpos: tuple[float, ...] | None
-    buffer: tuple[int, int] | None  # (planner blocks free, RX bytes free), facts §4.4
+    buffer: tuple[int, int] | None  # (planner blocks free, RX bytes free), firmware-facts §4.4
     line_number: int | None
     feed: float | None  # mm/min, or in/min when $13=1
     spindle_speed: float | None  # rpm
@@ -293,7 +291,8 @@ def _parse_ints(text: str, what: str, count: int) -> tuple[int, ...]:
     return tuple(_parse_int(p, what) for p in parts)
 
 
-# --- status reports (facts §5.4) ------------------------------------------------------------
+# --- status reports (firmware-facts §5.4)
+# ------------------------------------------------------------
 
 _STATE = re.compile(r"([A-Za-z]+)(?::(\d+))?")
 _VALUED_FIELDS = frozenset({"MPos", "WPos", "WCO", "Bf", "Ln", "FS", "F", "Pn", "Ov", "A"})
@@ -368,7 +367,8 @@ def _parse_status(text: str) -> StatusReport:
     )
 
 
-# --- bracketed push messages and query replies (facts §5.3) ----------------------------------
+# --- bracketed push messages and query replies (firmware-facts §5.3)
+# ----------------------------------
 
 _PARAM_NAME = re.compile(r"G\d+(?:\.\d)?|TLO|PRB")
 
@@ -482,7 +482,7 @@ def _parse_startup(text: str) -> StartupLineResult:
 
 
 def _parse_banner(text: str) -> Banner | None:
-    """The welcome line of Grbl, grblHAL or FluidNC (facts §5.3, §7), or None."""
+    """The welcome line of Grbl, grblHAL or FluidNC (firmware-facts §5.3, §7), or None."""
     match = _BANNER.fullmatch(text)
     if match is None:
         return None

@@ -57,8 +57,9 @@ def unit(v: Sequence[float]) -> Vec:
 def limit_by_axis_maximum(max_per_axis: Sequence[float], unit_vec: Sequence[float]) -> float:
     """The largest vector magnitude whose per-axis components stay within their maxima.
 
-    This is Grbl's `limit_value_by_axis_maximum` (facts §4.2): the minimum over the axes that move
-    of max_i / |u_i|. It gives the feed cap ($11x) and the acceleration (`$12x`) along a move.
+    This is Grbl's `limit_value_by_axis_maximum` (firmware-facts §4.2): the minimum over the axes
+    that move of max_i / |u_i|. It gives the feed cap ($11x) and the acceleration (`$12x`) along a
+    move.
     """
     best = math.inf
     for limit, component in zip(max_per_axis, unit_vec, strict=True):

@@ -2,10 +2,10 @@
 
 A link knows nothing of jogging. It guarantees three things the layers above rely on:
 - `send_line` puts exactly one `\\n` after the text and refuses text that would confuse Grbl's
-  line reader (facts §1.1, §5.2);
+  line reader (firmware-facts §1.1, §5.2);
 - `send_realtime` never waits behind queued lines: the byte overtakes every line the link still
   holds, and goes out at a line boundary so grblHAL's jog cancel cannot cut a line in half
-  (facts §7);
+  (firmware-facts §7);
 - `read_line` returns each received line once, in order, and raises `LinkError` (never hangs) once
   the peer has gone or the link was closed.
 """
@@ -20,15 +20,12 @@ from types import TracebackType
 from typing import Self
 
 from smoothjog.core.errors import LinkError
+from smoothjog.core.realtime import EXTENDED_START, LOW_REALTIME, PRINTABLE_REALTIME
 from smoothjog.links.framing import DEFAULT_MAX_LINE_BYTES, LineFramer
 
-#: Characters Grbl picks out of the stream wherever they appear (facts §5.2): inside a line they
-#: would act at once (`!` holds, `~` resumes) instead of being part of the line.
-REALTIME_CHARS = frozenset("?!~")
-
-#: Single bytes below 0x80 that are realtime commands: `?`, `!`, `~`, Ctrl-X (reset) and
-#: grblHAL's 0x19 stop; every byte from 0x80 up is realtime or ignored (facts §5.2, §7).
-_LOW_REALTIME_BYTES = frozenset(b"?!~\x18\x19")
+#: Characters Grbl picks out of the stream wherever they appear (firmware-facts §5.2): inside a line
+#: they would act at once (`!` holds, `~` resumes) instead of being part of the line.
+REALTIME_CHARS = frozenset(chr(byte) for byte in PRINTABLE_REALTIME)
 
 
 class RefusedError(LinkError):
@@ -49,7 +46,7 @@ def encode_line(text: str) -> bytes:
                 " wherever it appears: send it with send_realtime() instead"
             )
         # Bytes >= 0x80 are realtime commands or dropped, bytes < 0x20 are dropped or reset
-        # the controller (0x18), so only printable ASCII can travel inside a line.
+        # the controller (Ctrl-X), so only printable ASCII can travel inside a line.
         if not " " <= char <= "~":
             raise RefusedError(
                 f"line {text!r} contains the character {char!r} at position {index}:"
@@ -65,7 +62,8 @@ def check_realtime(byte: bytes) -> None:
             f"a realtime command is exactly one byte, not {len(byte)} ({byte!r}):"
             " send lines with send_line()"
         )
-    if byte[0] < 0x80 and byte[0] not in _LOW_REALTIME_BYTES:
+    # From 0x80 up every byte is realtime or ignored by the controller (firmware-facts §5.2, §7).
+    if byte[0] < EXTENDED_START and byte[0] not in LOW_REALTIME:
         raise RefusedError(
             f"{byte!r} is not a realtime command (those are ?, !, ~, Ctrl-X and bytes"
             " 0x80-0xFF): send lines with send_line()"

@@ -1,9 +1,9 @@
 """Turn the byte stream a controller sends into lines, whatever the read boundaries.
 
-Grbl ends every line it sends with `\\r\\n` (facts §5.3); some firmware and terminals send a bare
-`\\n` or a bare `\\r`. All three end a line, and `\\r\\n` counts as one end, even when the `\\r` and
-the `\\n` arrive in different reads. A line that never ends (noise from a wrong baud rate, a peer
-that is not a controller) is cut at `max_line_bytes` so memory stays bounded.
+Grbl ends every line it sends with `\\r\\n` (firmware-facts §5.3); some firmware and terminals send
+a bare `\\n` or a bare `\\r`. All three end a line, and `\\r\\n` counts as one end, even when the
+`\\r` and the `\\n` arrive in different reads. A line that never ends (noise from a wrong baud rate,
+a peer that is not a controller) is cut at `max_line_bytes` so memory stays bounded.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Grbl 1.1h's serial protocol and state machine around the motion model, with time passed in.
 
-The model follows the firmware's structure so its flaws come out the same (facts §1-§5):
+The model follows the firmware's structure so its flaws come out the same (firmware-facts §1-§5):
 - an ISR model takes each received byte at its arrival time: realtime bytes only set flags (or
   reset at once), every other byte goes to the RX ring, which drops bytes when full;
 - a main-loop model reads lines from the ring, spends `line_time_s` parsing and planning each,
@@ -8,8 +8,8 @@ The model follows the firmware's structure so its flaws come out the same (facts
   (protocol_execute_realtime) whenever the firmware would: while polling, while blocked for a
   planner slot, a buffer sync or a dwell, and inside the suspend loop (hold, door, jog cancel);
 - the stepper ISR's step-idle delay ($1 ms) freezes the main loop after every cycle stop, and
-  once more inside a jog cancel's st_reset (facts §3.1, brief);
-- a jog cancel does not flush the RX ring nor the line blocked in mc_line (facts §3.1).
+  once more inside a jog cancel's st_reset (firmware-facts §3.1; the delay itself is from the code);
+- a jog cancel does not flush the RX ring nor the line blocked in mc_line (firmware-facts §3.1).
 
 Nothing here reads a clock: `receive`, `advance` and the constructor take the time.
 """
@@ -22,6 +22,23 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
+from smoothjog.core.codes import (
+    ALARM_ABORT_CYCLE,
+    ALARM_HARD_LIMIT,
+    ALARM_HOMING_FAIL_DOOR,
+    ALARM_HOMING_FAIL_RESET,
+    ALARM_SOFT_LIMIT,
+    ERR_BAD_NUMBER_FORMAT,
+    ERR_IDLE_ERROR,
+    ERR_INVALID_STATEMENT,
+    ERR_LINE_LENGTH_EXCEEDED,
+    ERR_OVERFLOW,
+    ERR_SETTING_DISABLED,
+    ERR_SYSTEM_GC_LOCK,
+    ERR_TRAVEL_EXCEEDED,
+    STATUS_OK,
+)
+from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD, JogClip
 from smoothjog.core.gcode import (
     ExecResult,
     ParserState,
@@ -32,16 +49,16 @@ from smoothjog.core.gcode import (
     preparse,
     read_number,
 )
+from smoothjog.core.realtime import EXTENDED_START, Realtime
 from smoothjog.core.units import mm_to_inch
 from smoothjog.sim.motion import CYCLE_STOP, AxisLimits, Motion, TraceSegment
 from smoothjog.sim.profiles import (
     GRBL,
     FirmwareProfile,
-    JogClip,
     MachineProfile,
     load_machine_profile,
 )
-from smoothjog.sim.rxbuffer import Realtime, RxRing, classify
+from smoothjog.sim.rxbuffer import RxRing, classify
 from smoothjog.sim.settings import Eeprom, GrblSettings, format_grbl_float
 from smoothjog.sim.status import StatusInputs, StatusReporter
 
@@ -86,23 +103,6 @@ EXEC_MOTION_CANCEL = 1 << 6
 EXEC_SLEEP = 1 << 7
 _HOLD_GROUP = EXEC_MOTION_CANCEL | EXEC_FEED_HOLD | EXEC_SAFETY_DOOR | EXEC_SLEEP
 
-# Alarm codes (facts §5.6).
-ALARM_HARD_LIMIT = 1
-ALARM_SOFT_LIMIT = 2
-ALARM_ABORT_CYCLE = 3
-ALARM_HOMING_FAIL_RESET = 6
-ALARM_HOMING_FAIL_DOOR = 7
-
-# Status codes the protocol layer itself sends (facts §5.7).
-_E_BAD_NUMBER = 2
-_E_INVALID_STATEMENT = 3
-_E_SETTING_DISABLED = 5
-_E_NOT_IDLE = 8
-_E_GCODE_LOCKED = 9
-_E_OVERFLOW = 11
-_E_LINE_LENGTH = 14
-_E_TRAVEL_EXCEEDED = 15
-
 #: `delay_sec` in a dwell sleeps in 50 ms steps (DWELL_TIME_STEP), so G4 P is rounded up to them.
 DWELL_STEP_S = 0.050
 #: Door resume waits for the spindle / coolant to come back (SAFETY_DOOR_*_DELAY).
@@ -118,7 +118,8 @@ _EPS_S = 1e-12
 HELP_LINE = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
 
 #: Feed and spindle override flags in the order protocol_exec_rt_system applies them: a reset to
-#: 100 %, then each step; the sum is clamped to 10-200 % once, after all of them (facts §5.2).
+#: 100 %, then each step; the sum is clamped to 10-200 % once, after all of them (firmware-facts
+#: §5.2).
 _FEED_STEPS: tuple[tuple[Realtime, int | None], ...] = (
     (Realtime.FEED_OVR_RESET, None),
     (Realtime.FEED_OVR_COARSE_PLUS, 10),
@@ -235,7 +236,7 @@ class _Call:
 
 _Step = _Busy | _Execute | _Plan | _Sync | _Dwell | _SoftLimit | _Home | _Emit | _Call
 #: Steps during which the line has been parsed and is "inside" execution: a reset then still
-#: gets that line's reply (the stray ok of facts §3.4).
+#: gets that line's reply (the stray ok of firmware-facts §3.4).
 _IN_EXECUTION = (_Plan, _Sync, _Dwell, _SoftLimit, _Home)
 #: Steps that wait inside protocol_execute_realtime (a checkpoint before each look at them).
 _AT_CHECKPOINT = (_Plan, _Sync, _Dwell, _SoftLimit)
@@ -260,7 +261,8 @@ class GrblFirmware:
         on_eeprom_write: Callable[[Eeprom], None] | None = None,
         now_s: float = 0.0,
     ) -> None:
-        """Power the controller up at now_s: banner, then Idle or Alarm (facts §2, §5.3)."""
+        """Power the controller up at now_s: banner, then Idle or Alarm (firmware-facts §2,
+        §5.3)."""
         if machine is None:
             machine = "grbl-defaults"
         if isinstance(machine, str):
@@ -285,12 +287,12 @@ class GrblFirmware:
         self.motion = Motion(
             self._axis_limits(),
             junction_deviation_mm=self.settings[11],
-            planner_blocks=firmware.planner_blocks,
+            planner_blocks=firmware.facts.planner_usable_blocks,
         )
         self.parser = ParserState.initial(
             self.n_axes, coord_systems_mm=coords, g28_mm=g28, g30_mm=g30
         )
-        self.rx = RxRing(firmware.rx_size)
+        self.rx = RxRing(firmware.facts.rx_buffer_bytes)
         self.reporter = StatusReporter()
         self.state = IDLE
         self.suspend = 0
@@ -307,15 +309,15 @@ class GrblFirmware:
         self._held_line: bytes | None = None
         self._overrides = _Overrides()
         # Override requests are flags, as in the firmware: one raised twice before the main loop
-        # services it counts once (facts §5.2).
+        # services it counts once (firmware-facts §5.2).
         self._pending_overrides: set[Realtime] = set()
         self._accessories_off = False  # spindle/coolant cut by a door or sleep
         self._restore_until_s: float | None = None
         self._sleep_reported = False
         self._output: list[tuple[float, bytes]] = []
-        #: Time one output byte takes on the wire (115200 8N1 unless the rig says otherwise), and
-        #: when the UART will have sent everything queued so far.
-        self.tx_byte_s = 10 / 115200
+        #: Time one output byte takes on the wire (the default baud, 8N1, unless the rig says
+        #: otherwise), and when the UART will have sent everything queued so far.
+        self.tx_byte_s = BITS_PER_BYTE_8N1 / DEFAULT_BAUD
         self._tx_done_s = 0.0
         #: A run of plain line bytes (line bytes other than a line end), for receive's fast path.
         plain = b"".join(
@@ -357,7 +359,7 @@ class GrblFirmware:
 
     def is_line_byte(self, byte: int) -> bool:
         """True when byte goes to the RX ring (it is not a realtime command or discarded)."""
-        return byte < 0x80 and byte not in self.profile.realtime
+        return byte < EXTENDED_START and byte not in self.profile.realtime
 
     def _polling_quietly(self) -> bool:
         """The main loop sits in its reader with nothing pending: a byte is consumed at once."""
@@ -499,7 +501,8 @@ class GrblFirmware:
             self._run_startup_lines(now_s)
 
     def _abort(self, now_s: float) -> None:
-        """A soft reset reaches the main loop: stray reply, then re-initialise (facts §3.4)."""
+        """A soft reset reaches the main loop: stray reply, then re-initialise (firmware-facts
+        §3.4)."""
         head = self._steps[0] if self._steps else None
         if isinstance(head, _IN_EXECUTION):
             # The line was inside mc_line / a sync / a dwell: it returns and gets its reply.
@@ -581,7 +584,7 @@ class GrblFirmware:
         elif kind is Realtime.SAFETY_DOOR:
             self._rt |= EXEC_SAFETY_DOOR
         elif kind is Realtime.JOG_CANCEL:
-            if self.profile.cancel_flushes_rx:
+            if self.profile.facts.jog_cancel.flushes_rx:
                 # grblHAL: the input buffer and a half-read line are dropped in any state (§7).
                 self.rx.clear()
                 self._line_buf.clear()
@@ -678,7 +681,8 @@ class GrblFirmware:
                 self._step_idle_delay(event_s)
 
     def _step_idle_delay(self, t_s: float) -> None:
-        """st_go_idle's delay of $1 ms, which keeps the main loop from running (brief, §3.1)."""
+        """st_go_idle's delay of $1 ms, which keeps the main loop from running (firmware-facts
+        §3.1)."""
         lock_ms = self.settings.int_value(1)
         if (lock_ms != 255 or self._rt_alarm or self.state == SLEEP) and self.state != HOMING:
             self._freeze(t_s, lock_ms / 1000.0)
@@ -824,7 +828,7 @@ class GrblFirmware:
         """protocol_main_loop's reader: take bytes until a line end, then execute that line."""
         if self._held_line is not None:
             raw, self._held_line = self._held_line, None
-            pre = preparse(raw, max_line_chars=self.profile.max_line_chars)
+            pre = preparse(raw, max_line_chars=self.profile.facts.max_line_chars)
             if pre.text and not pre.overflow:
                 self._steps.append(_Busy(self.profile.line_time_s))
             self._steps.append(_Execute(pre.text, pre.overflow))
@@ -910,11 +914,11 @@ class GrblFirmware:
     def _hold_events(self, flags: int, now_s: float) -> None:
         """Motion cancel, feed hold, safety door and sleep, with Grbl's state rules (§3)."""
         if (
-            not self.profile.hold_cancels_jog
+            not self.profile.facts.jog_cancel.feed_hold_cancels
             and self.state == JOG
             and not flags & (EXEC_MOTION_CANCEL | EXEC_SAFETY_DOOR | EXEC_SLEEP)
         ):
-            return  # grblHAL ignores a feed hold while jogging (facts §7)
+            return  # grblHAL ignores a feed hold while jogging (firmware-facts §7)
         if self.state not in (ALARM, CHECK):
             if self.state in (CYCLE, JOG) and not self.suspend & (
                 SUSPEND_MOTION_CANCEL | SUSPEND_JOG_CANCEL
@@ -924,7 +928,7 @@ class GrblFirmware:
                 if self.state == JOG and not flags & EXEC_SLEEP:
                     # Any hold event in Jog is a jog cancel (§3.2, §3.3).
                     self.suspend |= SUSPEND_JOG_CANCEL
-                    if self.profile.cancel_drops_blocked_jog:
+                    if self.profile.facts.jog_cancel.drops_blocked_jog:
                         self._drop_blocked_jog()
             if self.state == IDLE:
                 # Not moving: the hold is complete at once; lines stop being read (§3.2). A
@@ -987,7 +991,7 @@ class GrblFirmware:
             return
         if self.suspend & SUSPEND_JOG_CANCEL:
             # plan_reset + st_reset + gc_sync_position + plan_sync_position. The blocked line
-            # and the RX ring are left alone: that is the ghost jog of facts §3.1.
+            # and the RX ring are left alone: that is the ghost jog of firmware-facts §3.1.
             self._exec_hold = False
             self.motion.clear_after_stop()
             self.parser = self.parser.with_position(self.mpos_mm())
@@ -1047,8 +1051,8 @@ class GrblFirmware:
     def _apply_overrides(self, now_s: float) -> None:
         """Service the override and accessory flags raised since the last checkpoint.
 
-        Feed and rapid changes re-plan the queued blocks (jogs keep their speed, facts §4.2);
-        Ov: is forced into the next report only when a value or the coolant really changed.
+        Feed and rapid changes re-plan the queued blocks (jogs keep their speed, firmware-facts
+        §4.2); Ov: is forced into the next report only when a value or the coolant really changed.
         """
         flags = self._pending_overrides
         pct = self._overrides.pct
@@ -1122,14 +1126,14 @@ class GrblFirmware:
     def _emit(self, now_s: float, text: str) -> None:
         """Queue one line to the host; if the TX ring cannot take it all, the main loop waits.
 
-        serial_write busy-waits for room (facts §5.1): the main loop is free again once the
-        last byte is in the ring, i.e. when no more than tx_size bytes are left to send.
+        serial_write busy-waits for room (firmware-facts §5.1): the main loop is free again once the
+        last byte is in the ring, i.e. when no more than the TX buffer's bytes are left to send.
         """
         data = text.encode("ascii") + b"\r\n"
         self._output.append((now_s, data))
         byte_s = self.tx_byte_s
         self._tx_done_s = max(self._tx_done_s, now_s) + len(data) * byte_s
-        free_at = self._tx_done_s - self.profile.tx_size * byte_s
+        free_at = self._tx_done_s - self.profile.facts.tx_buffer_bytes * byte_s
         if free_at > self._frozen_until_s and free_at > now_s + _EPS_S:
             self._frozen_until_s = free_at
 
@@ -1138,17 +1142,17 @@ class GrblFirmware:
         """protocol_main_loop's dispatch of one complete line; returns the work it starts."""
         text = step.text
         if step.overflow:
-            return [_Emit(f"error:{_E_OVERFLOW}")]
+            return [_Emit(f"error:{ERR_OVERFLOW}")]
         if not text:
             return [_Emit("ok")]
         if text[0] == "$":
             return self._system_line(text, now_s)
         if self.state in (ALARM, JOG):
-            return [_Emit(f"error:{_E_GCODE_LOCKED}")]
+            return [_Emit(f"error:{ERR_SYSTEM_GC_LOCK}")]
         return self._gcode_line(text)
 
     def _envelope(self) -> TravelBox | None:
-        """The soft-limit box when $20=1: -$13x <= target <= 0 on every axis (facts §2)."""
+        """The soft-limit box when $20=1: -$13x <= target <= 0 on every axis (firmware-facts §2)."""
         if not self.settings.int_value(20):
             return None
         travel = [self.settings[130 + i] for i in range(self.n_axes)]
@@ -1208,16 +1212,17 @@ class GrblFirmware:
         target = res.motion.target_mm
         box = self._envelope()
         if box is not None and not box.contains(target):
-            clip = self.profile.jog_clip
+            clip = self.profile.facts.jog_clip
             if clip is JogClip.CLIP_PER_AXIS:
                 target = _clip_per_axis(target, box)
             elif clip is JogClip.CLIP_IF_40 and self.settings.int_value(40):
                 target = _clip_along_line(self.parser.position_mm, target, box)
             else:
-                return [_Emit(f"error:{_E_TRAVEL_EXCEEDED}")]
+                return [_Emit(f"error:{ERR_TRAVEL_EXCEEDED}")]
         # The parser position moves only once mc_line returns (gc_execute_line copies the target
         # after jog_execute), so a cancel's gc_sync_position during a blocked jog is overwritten
-        # by that jog's target: the ghost jog of facts §3.1 ends exactly where the queue would.
+        # by that jog's target: the ghost jog of firmware-facts §3.1 ends exactly where the queue
+        # would.
         return [_Plan(target, res.motion.feed_mm_min, rapid=False, jog=True), _Emit("ok")]
 
     def _plan_step(self, step: _Plan, now_s: float) -> bool:
@@ -1271,10 +1276,10 @@ class GrblFirmware:
             return self._jog_line(text)
         if cmd in "$GCX":
             if len(text) != 2:
-                return self._reply(_E_INVALID_STATEMENT)
+                return self._reply(ERR_INVALID_STATEMENT)
             if cmd == "$":
                 if self.state in (CYCLE, HOLD):
-                    return self._reply(_E_NOT_IDLE)
+                    return self._reply(ERR_IDLE_ERROR)
                 return [*(_Emit(line) for line in self.settings.dollar_lines()), _Emit("ok")]
             if cmd == "G":
                 inches = bool(self.settings.int_value(13))
@@ -1284,7 +1289,7 @@ class GrblFirmware:
                     self._mc_reset(now_s)
                     return [_Emit("[MSG:Disabled]"), _Emit("ok")]
                 if self.state != IDLE:
-                    return self._reply(_E_NOT_IDLE)
+                    return self._reply(ERR_IDLE_ERROR)
                 self.state = CHECK
                 return [_Emit("[MSG:Enabled]"), _Emit("ok")]
             if self.state == ALARM:  # $X
@@ -1292,20 +1297,20 @@ class GrblFirmware:
                 return [_Emit("[MSG:Caution: Unlocked]"), _Emit("ok")]
             return [_Emit("ok")]
         if self.state not in (IDLE, ALARM):
-            return self._reply(_E_NOT_IDLE)
+            return self._reply(ERR_IDLE_ERROR)
         if cmd == "#":
             if len(text) != 2:
-                return self._reply(_E_INVALID_STATEMENT)
+                return self._reply(ERR_INVALID_STATEMENT)
             return [*(_Emit(line) for line in self._parameter_lines()), _Emit("ok")]
         if cmd == "H":
             if not self.settings.int_value(22):
-                return self._reply(_E_SETTING_DISABLED)
+                return self._reply(ERR_SETTING_DISABLED)
             if len(text) != 2:
-                return self._reply(_E_INVALID_STATEMENT)
+                return self._reply(ERR_INVALID_STATEMENT)
             return [_Home(), _Emit("ok")]
         if cmd == "S":
             if text != "$SLP":
-                return self._reply(_E_INVALID_STATEMENT)
+                return self._reply(ERR_INVALID_STATEMENT)
             self._rt |= EXEC_SLEEP
             return [_Emit("ok")]
         if cmd == "I":
@@ -1316,7 +1321,7 @@ class GrblFirmware:
                     _Emit("ok"),
                 ]
             if text[2] != "=":
-                return self._reply(_E_INVALID_STATEMENT)
+                return self._reply(ERR_INVALID_STATEMENT)
             self.build_info = text[3:]
             self._eeprom_written()
             return [_Emit("ok")]
@@ -1329,12 +1334,12 @@ class GrblFirmware:
 
     def _reply(self, code: int) -> list[_Step]:
         """A single `error:N` reply (or ok for 0)."""
-        return [_Emit("ok" if code == 0 else f"error:{code}")]
+        return [_Emit("ok" if code == STATUS_OK else f"error:{code}")]
 
     def _restore(self, text: str, now_s: float) -> list[_Step]:
         """`$RST=$`, `$RST=#`, `$RST=*`: restore EEPROM data, then a soft reset."""
         if len(text) != 6 or not text.startswith("$RST=") or text[5] not in "$#*":
-            return self._reply(_E_INVALID_STATEMENT)
+            return self._reply(ERR_INVALID_STATEMENT)
         which = text[5]
         if which in "$*":
             fresh = GrblSettings(self.n_axes, self.profile.extra_settings)
@@ -1356,21 +1361,22 @@ class GrblFirmware:
         return [_Emit("[MSG:Restoring defaults]"), _Emit("ok")]
 
     def _store_line(self, text: str) -> list[_Step]:
-        """`$Nx=line` and `$x=val` (facts §2 rules for $20/$22 live in GrblSettings.store)."""
+        """`$Nx=line` and `$x=val` (firmware-facts §2 rules for $20/$22 live in
+        GrblSettings.store)."""
         startup = text[1] == "N"
         start = 2 if startup else 1
         if startup and self.state != IDLE:
-            return self._reply(_E_NOT_IDLE)
+            return self._reply(ERR_IDLE_ERROR)
         number = read_number(text, start)
         if number is None:
-            return self._reply(_E_BAD_NUMBER)
+            return self._reply(ERR_BAD_NUMBER_FORMAT)
         parameter, index = number
         if index >= len(text) or text[index] != "=":
-            return self._reply(_E_INVALID_STATEMENT)
+            return self._reply(ERR_INVALID_STATEMENT)
         rest = text[index + 1 :]
         if startup:
             if len(rest) + 1 > STARTUP_LINE_CHARS:
-                return self._reply(_E_LINE_LENGTH)
+                return self._reply(ERR_LINE_LENGTH_EXCEEDED)
             # Assumption: the line is checked by parsing it against a copy of the parser state;
             # Grbl executes it for real, which only matters for lines that move.
             res = execute_block(rest, self.parser, jog=False, n_axes=self.n_axes)
@@ -1383,13 +1389,13 @@ class GrblFirmware:
             return [_Emit("ok")]
         value = read_number(rest, 0)
         if value is None:
-            return self._reply(_E_BAD_NUMBER)
+            return self._reply(ERR_BAD_NUMBER_FORMAT)
         if value[1] != len(rest) or parameter > 255:
-            return self._reply(_E_INVALID_STATEMENT)
+            return self._reply(ERR_INVALID_STATEMENT)
         setting = math.trunc(parameter)
         before = self.settings.snapshot()
         code = self.settings.store(setting, value[0])
-        if code == 0:
+        if code == STATUS_OK:
             if setting == 13 and before[13] != self.settings[13]:
                 self.reporter.force_wco()
             if setting == 11 or setting >= 100:
@@ -1482,7 +1488,7 @@ class GrblFirmware:
             return True
         if self._rt & EXEC_SAFETY_DOOR and not self._rt & EXEC_RESET:
             # limits_go_home watches the door as well as reset: ALARM:7, then the reset that
-            # mc_reset starts (the door flag dies with the re-initialisation; facts §5.6).
+            # mc_reset starts (the door flag dies with the re-initialisation; firmware-facts §5.6).
             self._mc_reset(now_s)
             self._rt_alarm = ALARM_HOMING_FAIL_DOOR
         if self._rt & EXEC_RESET:
@@ -1501,7 +1507,7 @@ class GrblFirmware:
 
 
 def _clip_per_axis(target_mm: Vec, box: TravelBox) -> Vec:
-    """FluidNC's constrain_jog: each axis clamped to its soft limits (facts §7).
+    """FluidNC's constrain_jog: each axis clamped to its soft limits (firmware-facts §7).
 
     Simplification: FluidNC's "nudge" for an axis already outside its limits is not modelled.
     """
@@ -1511,7 +1517,8 @@ def _clip_per_axis(target_mm: Vec, box: TravelBox) -> Vec:
 
 
 def _clip_along_line(start_mm: Vec, target_mm: Vec, box: TravelBox) -> Vec:
-    """grblHAL's `$40=1` jog limit: stop where the straight path leaves the envelope (facts §7)."""
+    """grblHAL's `$40=1` jog limit: stop where the straight path leaves the envelope (firmware-facts
+    §7)."""
     fraction = 1.0
     for s, t, lo, hi in zip(start_mm, target_mm, box.min_mm, box.max_mm, strict=True):
         delta = t - s

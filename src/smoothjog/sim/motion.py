@@ -1,8 +1,8 @@
 """Grbl's planner and step-segment generator as a pure, time-driven model with a ground truth.
 
-What it reproduces (facts §4): a ring of `planner_blocks` linear blocks; per-axis max rate and
-acceleration limited along the move vector; junction deviation between blocks; every plan ends at
-rest (the newest block exits at speed 0); a block added to an empty planner starts from rest; the
+What it reproduces (firmware-facts §4): a ring of `planner_blocks` linear blocks; per-axis max rate
+and acceleration limited along the move vector; junction deviation between blocks; every plan ends
+at rest (the newest block exits at speed 0); a block added to an empty planner starts from rest; the
 step preparer cuts the tail block into segments of at most `segment_s`, keeps `segment_buffer` of
 them (the executing one included) committed ahead, and discards a block from the planner once the
 last of it is cut; a hold decelerates from the speed at the end of the committed segments, at each
@@ -86,7 +86,7 @@ class _Block:
     entry_sqr: float = 0.0
     #: The rate the line asked for (mm/s), the axes' rapid rate along it, whether it is a rapid,
     #: whether feed override applies (not to jogs or homing), and its junction limit, so that an
-    #: override change can recompute nominal_mm_s and max_entry_sqr (facts §4.2, §4.3).
+    #: override change can recompute nominal_mm_s and max_entry_sqr (firmware-facts §4.2, §4.3).
     programmed_mm_s: float = 0.0
     rapid_mm_s: float = 0.0
     rapid: bool = False
@@ -141,7 +141,7 @@ class Motion:
         self._planner_steps: tuple[int, ...] = (0,) * n
         self._prev_unit: tuple[float, ...] = (0.0,) * n
         self._prev_nominal_mm_s = 0.0
-        # Feed and rapid override as fractions (facts §5.2); jog blocks ignore both.
+        # Feed and rapid override as fractions (firmware-facts §5.2); jog blocks ignore both.
         self._feed_ovr = 1.0
         self._rapid_ovr = 1.0
         self._blocks: deque[_Block] = deque()
@@ -192,7 +192,7 @@ class Motion:
         """Queue one linear block to target_mm (machine mm); False if it rounds to no step.
 
         feed_override=False for jogs and homing moves: feed override leaves them alone, and a
-        jog is not a rapid, so rapid override does not touch it either (facts §4.2).
+        jog is not a rapid, so rapid override does not touch it either (firmware-facts §4.2).
         """
         if len(self._blocks) >= self.planner_blocks:
             raise RuntimeError("plan_line called with the planner full")
@@ -209,7 +209,7 @@ class Motion:
         unit_vec = tuple(d / length_mm for d in delta_mm)
         accel = limit_by_axis_maximum(self._accel, unit_vec)
         rapid_mm_s = limit_by_axis_maximum(self._max_rate_mm_s, unit_vec)
-        # facts §4.3: a block added to an empty planner starts from rest.
+        # firmware-facts §4.3: a block added to an empty planner starts from rest.
         junction_sqr = self._junction_speed_sqr(unit_vec) if self._blocks else 0.0
         start_mm = tuple(
             s / spm for s, spm in zip(self._planner_steps, self._steps_per_mm, strict=True)
@@ -260,7 +260,7 @@ class Motion:
         return max(nominal, mm_min_to_mm_s(self.min_feed_mm_min))
 
     def set_overrides(self, feed_pct: int, rapid_pct: int, now_s: float) -> None:
-        """A feed or rapid override changed: re-plan every queued block (facts §4.3).
+        """A feed or rapid override changed: re-plan every queued block (firmware-facts §4.3).
 
         As plan_update_velocity_profile_parameters plus plan_cycle_reinitialize: new nominal
         speeds and entry limits for every block, then a re-plan from where the step preparer
@@ -278,7 +278,8 @@ class Motion:
         self._recalculate()
 
     def _junction_speed_sqr(self, unit_vec: tuple[float, ...]) -> float:
-        """Grbl's junction-deviation limit between the previous block and this one (facts §4.3)."""
+        """Grbl's junction-deviation limit between the previous block and this one (firmware-facts
+        §4.3)."""
         return junction_speed_sqr(
             self._prev_unit, unit_vec, self._accel, self._junction_deviation_mm
         )

@@ -1,124 +1,87 @@
 """Firmware profiles (Grbl 1.1h, grblHAL, FluidNC) and machine profiles read from TOML files.
 
-A firmware profile holds what differs between controller families (facts §7) plus the timing
-parameters of the model; a machine profile holds `$` settings and how the machine starts.
+A firmware profile pairs a family's row of the firmware table (core/firmware.py: buffers, line
+length, jog-cancel and soft-limit behaviour, firmware-facts §7) with what only the simulator needs:
+the texts it prints and the timing parameters of the model. A machine profile holds `$` settings and
+how the machine starts.
 """
 
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from enum import Enum
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from smoothjog.core import firmware as firmware_table
+from smoothjog.core.defaults import ACCEL_SETTING, MAX_RATE_SETTING, STEPS_PER_MM_SETTING
 from smoothjog.core.errors import SimError
-from smoothjog.sim.rxbuffer import GRBL_REALTIME, GRBLHAL_EXTRA_REALTIME, Realtime
+from smoothjog.core.firmware import FirmwareFacts
+from smoothjog.core.realtime import GRBL_REALTIME, GRBLHAL_ALIASES, Realtime
 from smoothjog.sim.settings import GrblSettings
-
-
-class JogClip(Enum):
-    """What a controller does with a jog whose target lies outside the soft limits."""
-
-    #: Grbl 1.1h: error:15, nothing moves (facts §2).
-    REJECT = "reject"
-    #: grblHAL: clip to the envelope when `$40=1`, otherwise error:15 (facts §7).
-    CLIP_IF_40 = "clip_if_40"
-    #: FluidNC: clip each axis to its soft limits, never an error (facts §7).
-    CLIP_PER_AXIS = "clip_per_axis"
 
 
 @dataclass(frozen=True)
 class FirmwareProfile:
-    """What differs between controller families, and the model's timing parameters."""
+    """A simulated controller family: its firmware facts, its texts, the model's timings."""
 
-    name: str
+    facts: FirmwareFacts
     banner: str
     version_line: str
-    options_line: str
-    planner_blocks: int
-    rx_size: int
-    max_line_chars: int
-    #: 0x85 empties the RX ring and drops a half-read line, in any state (grblHAL).
-    cancel_flushes_rx: bool
-    #: A jog line blocked waiting for a planner slot is dropped (answered ok) by a cancel (FluidNC).
-    cancel_drops_blocked_jog: bool
-    #: `!` in Jog cancels the jog (Grbl, FluidNC); grblHAL ignores it (facts §7, UNCERTAIN there).
-    hold_cancels_jog: bool
-    jog_clip: JogClip
-    realtime: dict[int, Realtime]
+    #: Received byte value -> realtime meaning; other bytes >= 0x80 are dropped.
+    realtime: Mapping[int, Realtime]
     #: Time the main loop spends parsing and planning one line (s); see the profile comments.
     line_time_s: float
     #: Extra settings this family has beyond Grbl's (grblHAL's $40 jog limit).
     extra_settings: dict[int, float] = field(default_factory=dict)
-    #: The blocking pause after an ALARM message (facts §5.3).
+    #: The blocking pause after an ALARM message (firmware-facts §5.3).
     alarm_pause_s: float = 0.5
-    #: The TX ring: when output does not fit, the main loop waits for it to drain (facts §5.1).
-    tx_size: int = 104
+
+    @property
+    def name(self) -> str:
+        """The family name (grbl, grblhal, fluidnc)."""
+        return self.facts.name
+
+    @property
+    def options_line(self) -> str:
+        """`$I`'s `[OPT:]` line: variable spindle, usable planner blocks, RX bytes (firmware-facts
+        §4.1)."""
+        return f"[OPT:V,{self.facts.planner_usable_blocks},{self.facts.rx_buffer_bytes}]"
 
 
 # Timing parameters (assumptions where the facts are silent):
 # - line_time_s: Grbl 1.1h on a 16 MHz AVR needs roughly 1-5 ms to parse and plan a jog line
-#   (facts §9, seed "around 1 to 5 ms"); soft-float parsing of a ~20-char line is about 0.5 ms and
-#   the planner's reverse/forward pass over up to 15 blocks about 1 ms, so 1.5 ms is used. The
-#   32-bit controllers (grblHAL, FluidNC) have an FPU and 10x the clock: 0.3 ms.
-# - alarm_pause_s: the 500 ms delay after an ALARM message (facts §5.3).
-# - tx_size: Grbl 1.1h's 104-byte TX ring (facts §5.1). The facts give none for grblHAL and
-#   FluidNC; both queue output in buffers of a kilobyte or more, so 1024 is assumed (in effect:
-#   their main loop never waits for the wire).
+#   (firmware-facts §9); soft-float parsing of a ~20-char line is about 0.5 ms and the planner's
+#   reverse/forward pass over up to 15 blocks about 1 ms, so 1.5 ms is used. The 32-bit
+#   controllers (grblHAL, FluidNC) have an FPU and 10x the clock: 0.3 ms.
+# - alarm_pause_s: the 500 ms delay after an ALARM message (firmware-facts §5.3).
 GRBL = FirmwareProfile(
-    name="grbl",
+    facts=firmware_table.GRBL,
     banner="Grbl 1.1h ['$' for help]",
     version_line="[VER:1.1h.20190830:{user}]",
-    options_line="[OPT:V,15,128]",
-    planner_blocks=15,
-    rx_size=128,
-    max_line_chars=79,
-    cancel_flushes_rx=False,
-    cancel_drops_blocked_jog=False,
-    hold_cancels_jog=True,
-    jog_clip=JogClip.REJECT,
     realtime=dict(GRBL_REALTIME),
     line_time_s=0.0015,
 )
 
+# grblHAL's other extra realtime bytes (firmware-facts §7) are not modelled: the simulator drops
+# them.
 GRBLHAL = FirmwareProfile(
-    name="grblhal",
+    facts=firmware_table.GRBLHAL,
     banner="GrblHAL 1.1f ['$' or '$HELP' for help]",
     version_line="[VER:1.1f.20260817:{user}]",
-    options_line="[OPT:V,100,1024]",
-    planner_blocks=100,
-    rx_size=1024,
-    max_line_chars=256,
-    cancel_flushes_rx=True,
-    # The facts find no explicit handling of a blocked jog in grblHAL (UNCERTAIN); Grbl's
-    # behaviour (the line is planned after the cancel) is kept.
-    cancel_drops_blocked_jog=False,
-    hold_cancels_jog=False,
-    jog_clip=JogClip.CLIP_IF_40,
-    realtime={**GRBL_REALTIME, **GRBLHAL_EXTRA_REALTIME},
+    realtime={**GRBL_REALTIME, **GRBLHAL_ALIASES},
     line_time_s=0.0003,
     extra_settings={40: 0},
-    tx_size=1024,
 )
 
-# FluidNC: 16 planner blocks with Bf = blocks - 1, i.e. 15 usable and reported (facts §7).
 FLUIDNC = FirmwareProfile(
-    name="fluidnc",
+    facts=firmware_table.FLUIDNC,
     banner="Grbl 3.9 [FluidNC v3.9.1 (sim-uart) '$' for help]",
     version_line="[VER:3.9 FluidNC v3.9.1:{user}]",
-    options_line="[OPT:V,15,256]",
-    planner_blocks=15,
-    rx_size=256,
-    max_line_chars=255,
-    cancel_flushes_rx=False,
-    cancel_drops_blocked_jog=True,
-    hold_cancels_jog=True,
-    jog_clip=JogClip.CLIP_PER_AXIS,
     realtime=dict(GRBL_REALTIME),
     line_time_s=0.0003,
-    tx_size=1024,
 )
 
 FIRMWARE_PROFILES: dict[str, FirmwareProfile] = {p.name: p for p in (GRBL, GRBLHAL, FLUIDNC)}
@@ -230,9 +193,11 @@ def parse_machine_profile(text: str, source: str) -> MachineProfile:
         if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
             raise SimError(f"{source}: settings key {key!r} must be a number >= 0, not {value!r}")
         settings[number] = float(value)
-    for number in (*range(100, 100 + n_axes), *range(110, 110 + n_axes), *range(120, 120 + n_axes)):
-        if settings.get(number, 1.0) <= 0.0:
-            raise SimError(f"{source}: settings key '{number}' must be greater than 0")
+    # A zero steps/mm, rate or acceleration would divide by zero in the planner model.
+    for group in (STEPS_PER_MM_SETTING, MAX_RATE_SETTING, ACCEL_SETTING):
+        for number in range(group, group + n_axes):
+            if settings.get(number, 1.0) <= 0.0:
+                raise SimError(f"{source}: settings key '{number}' must be greater than 0")
     return MachineProfile(
         name=name,
         description=description,

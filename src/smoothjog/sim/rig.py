@@ -15,6 +15,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from smoothjog.core.errors import SimError
+from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import Motion, TraceSegment
 
@@ -31,9 +32,9 @@ from smoothjog.sim.motion import Motion, TraceSegment
 class LinkModel:
     """A serial-like wire: baud rate, bits per byte, latency and its jitter."""
 
-    baud: int = 115200
+    baud: int = DEFAULT_BAUD
     #: 8N1: one start bit, eight data bits, one stop bit.
-    bits_per_byte: int = 10
+    bits_per_byte: int = BITS_PER_BYTE_8N1
     #: One-way latency added to every byte (a USB-serial bridge adds ~1 ms; 0 for a direct line).
     latency_s: float = 0.0
     #: Each chunk's latency is latency_s plus a uniform draw from [0, jitter_s).
@@ -116,7 +117,7 @@ class SimRig:
 
         clock_ratio is how fast the controller's clock runs against the host's: 1.0 for the
         same clock; 1.003 for a controller 0.3 % fast, as a simulator whose clock is only
-        roughly real time can be (facts §0 on grbl-sim). Times the rig takes and gives are
+        roughly real time can be (firmware-facts §0 on grbl-sim). Times the rig takes and gives are
         the host's; the firmware and its trace keep their own.
         """
         if not 0.5 < clock_ratio < 2.0:

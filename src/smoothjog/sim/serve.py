@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from smoothjog.core.errors import SimError
+from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
 from smoothjog.sim.rig import LinkModel, SimRig
@@ -81,7 +82,7 @@ class ServeOptions:
     link_path: Path | None = None
     pty: bool = True
     tcp_port: int | None = None
-    baud: int = 115200
+    baud: int = DEFAULT_BAUD
 
 
 def build_firmware(opts: ServeOptions) -> GrblFirmware:

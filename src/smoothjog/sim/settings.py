@@ -1,7 +1,8 @@
 """The simulated controller's `$` settings: storage, Grbl's store rules, and `$$` formatting.
 
-Numbers and rules follow facts §0 (defaults), §2 ($20 needs $22) and §5.3 (print format and order).
-Settings are kept as floats keyed by their `$` number; the integer ones are truncated on store.
+Numbers and rules follow firmware-facts §0 (defaults), §2 ($20 needs $22) and §5.3 (print format and
+order). Settings are kept as floats keyed by their `$` number; the integer ones are truncated on
+store.
 """
 
 from __future__ import annotations
@@ -13,61 +14,28 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from smoothjog.core.codes import (
+    ERR_INVALID_STATEMENT,
+    ERR_NEGATIVE_VALUE,
+    ERR_SETTING_STEP_PULSE_MIN,
+    ERR_SOFT_LIMIT_ERROR,
+    STATUS_OK,
+)
+from smoothjog.core.defaults import (
+    ACCEL_SETTING,
+    AXIS_GROUP_DEFAULTS,
+    GRBL_DEFAULTS,
+    MAX_RATE_SETTING,
+    MAX_TRAVEL_SETTING,
+    STEPS_PER_MM_SETTING,
+)
 from smoothjog.core.errors import SimError
 
-#: Grbl status codes used here (facts §5.7).
-STATUS_OK = 0
-STATUS_INVALID_STATEMENT = 3
-STATUS_NEGATIVE_VALUE = 4
-STATUS_STEP_PULSE_MIN = 6
-STATUS_SOFT_LIMIT_NEEDS_HOMING = 10
-
-#: Grbl 1.1h defaults for a 3-axis build (facts §0, `defaults.h` DEFAULTS_GENERIC).
-GRBL_DEFAULTS: dict[int, float] = {
-    0: 10,
-    1: 25,
-    2: 0,
-    3: 0,
-    4: 0,
-    5: 0,
-    6: 0,
-    10: 1,
-    11: 0.010,
-    12: 0.002,
-    13: 0,
-    20: 0,
-    21: 0,
-    22: 0,
-    23: 0,
-    24: 25.0,
-    25: 500.0,
-    26: 250,
-    27: 1.000,
-    30: 1000,
-    31: 0,
-    32: 0,
-    100: 250.0,
-    101: 250.0,
-    102: 250.0,
-    110: 500.0,
-    111: 500.0,
-    112: 500.0,
-    120: 10.0,
-    121: 10.0,
-    122: 10.0,
-    130: 200.0,
-    131: 200.0,
-    132: 200.0,
-}
-
-#: Settings printed with 3 decimals by `$$`; every other one prints as an integer (facts §5.3).
+#: Settings printed with 3 decimals by `$$`; every other one prints as an integer (firmware-facts
+#: §5.3).
 FLOAT_SETTINGS: frozenset[int] = frozenset({11, 12, 24, 25, 27, *range(100, 140)})
 #: Settings that are floats in the firmware but print with 0 decimals ($30/$31 spindle rpm).
 RPM_SETTINGS: frozenset[int] = frozenset({30, 31})
-
-#: First axis setting number and the stride between the four axis groups ($10x..$13x).
-AXIS_SETTINGS_START = 100
-AXIS_SETTINGS_STRIDE = 10
 
 
 @dataclass(frozen=True)
@@ -90,7 +58,8 @@ def format_setting_value(number: int, value: float) -> str:
 def format_grbl_float(value: float, decimals: int) -> str:
     """Print a float like Grbl's printFloat: sign first, then the magnitude rounded half up."""
     # Grbl rounds the magnitude half away from zero and keeps a '-' even when the digits are
-    # all zero (facts §5.4 "-0.000"); Python's formatting rounds half to even, so do it here.
+    # all zero (firmware-facts §5.4 "-0.000"); Python's formatting rounds half to even, so do it
+    # here.
     negative = value < 0.0 or (value == 0.0 and math.copysign(1.0, value) < 0.0)
     scaled = math.floor(abs(value) * 10**decimals + 0.5)
     whole, frac = divmod(scaled, 10**decimals)
@@ -112,13 +81,12 @@ class GrblSettings:
         self.n_axes = n_axes
         self._values: dict[int, float] = {}
         for number, value in GRBL_DEFAULTS.items():
-            if number >= AXIS_SETTINGS_START:
-                continue
-            self._values[number] = float(value)
-        for group in range(4):
+            if number < STEPS_PER_MM_SETTING:
+                self._values[number] = float(value)
+        # The per-axis groups repeat the default build's value on every axis there is.
+        for group, default in AXIS_GROUP_DEFAULTS.items():
             for axis in range(n_axes):
-                base = GRBL_DEFAULTS[AXIS_SETTINGS_START + AXIS_SETTINGS_STRIDE * group]
-                self._values[AXIS_SETTINGS_START + AXIS_SETTINGS_STRIDE * group + axis] = base
+                self._values[group + axis] = default
         for number, value in (extra_defaults or {}).items():
             self._values[number] = float(value)
 
@@ -131,7 +99,8 @@ class GrblSettings:
         return int(self._values[number])
 
     def numbers(self) -> list[int]:
-        """Every setting number, in the order `$$` prints them (ascending, as in facts §5.3)."""
+        """Every setting number, in the order `$$` prints them (ascending, as in firmware-facts
+        §5.3)."""
         return sorted(self._values)
 
     def items(self) -> Iterable[tuple[int, float]]:
@@ -141,18 +110,18 @@ class GrblSettings:
     def axis(self, index: int) -> AxisSettings:
         """The steps/mm, max rate, acceleration and travel of one axis."""
         return AxisSettings(
-            steps_per_mm=self._values[100 + index],
-            max_rate_mm_min=self._values[110 + index],
-            accel_mm_s2=self._values[120 + index],
-            max_travel_mm=self._values[130 + index],
+            steps_per_mm=self._values[STEPS_PER_MM_SETTING + index],
+            max_rate_mm_min=self._values[MAX_RATE_SETTING + index],
+            accel_mm_s2=self._values[ACCEL_SETTING + index],
+            max_travel_mm=self._values[MAX_TRAVEL_SETTING + index],
         )
 
     def store(self, number: int, value: float) -> int:
         """Store `$number=value` with Grbl's checks; returns a Grbl status code (0 = ok)."""
         if value < 0.0:
-            return STATUS_NEGATIVE_VALUE
+            return ERR_NEGATIVE_VALUE
         if number not in self._values:
-            return STATUS_INVALID_STATEMENT
+            return ERR_INVALID_STATEMENT
         if number in FLOAT_SETTINGS or number in RPM_SETTINGS:
             self._values[number] = value
             return STATUS_OK
@@ -160,14 +129,14 @@ class GrblSettings:
         # AVR's float-to-byte conversion does in practice).
         int_value = math.trunc(value) % 256
         if number == 0 and int_value < 3:
-            return STATUS_STEP_PULSE_MIN
+            return ERR_SETTING_STEP_PULSE_MIN
         if number == 20 and int_value and not self.int_value(22):
-            return STATUS_SOFT_LIMIT_NEEDS_HOMING
+            return ERR_SOFT_LIMIT_ERROR
         if number in FLAG_SETTINGS:
             int_value = 1 if int_value else 0
         self._values[number] = float(int_value)
         if number == 22 and not int_value:
-            # Turning homing off also turns soft limits off (facts §2).
+            # Turning homing off also turns soft limits off (firmware-facts §2).
             self._values[20] = 0.0
         return STATUS_OK
 

@@ -1,6 +1,6 @@
 """Build Grbl 1.1h status reports (`<...>`), including the WCO and Ov refresh counters.
 
-Field order, formats and counter rules are those of facts §5.4 and §5.5.
+Field order, formats and counter rules are those of firmware-facts §5.4 and §5.5.
 """
 
 from __future__ import annotations
@@ -11,14 +11,15 @@ from dataclasses import dataclass
 from smoothjog.core.units import mm_to_inch
 from smoothjog.sim.settings import format_grbl_float
 
-#: Reports between WCO fields while busy / otherwise (REPORT_WCO_REFRESH_*_COUNT, facts §5.4).
+#: Reports between WCO fields while busy / otherwise (REPORT_WCO_REFRESH_*_COUNT, firmware-facts
+#: §5.4).
 WCO_BUSY_COUNT = 30
 WCO_IDLE_COUNT = 10
 #: Reports between Ov fields while busy / otherwise (REPORT_OVR_REFRESH_*_COUNT).
 OVR_BUSY_COUNT = 20
 OVR_IDLE_COUNT = 10
 
-#: States in which the counters use their "busy" period and FS shows a feed (facts §5.4).
+#: States in which the counters use their "busy" period and FS shows a feed (firmware-facts §5.4).
 BUSY_STATES = frozenset({"Run", "Hold", "Jog", "Home", "Door"})
 
 
@@ -85,7 +86,7 @@ class StatusReporter:
             self.wco_counter -= 1
         else:
             self.wco_counter = (WCO_BUSY_COUNT if busy else WCO_IDLE_COUNT) - 1
-            # Ov is put off by one report when WCO is printed (facts §5.4).
+            # Ov is put off by one report when WCO is printed (firmware-facts §5.4).
             if self.ovr_counter == 0:
                 self.ovr_counter = 1
             parts.append("WCO:" + axes(inp.wco_mm))
