@@ -1,0 +1,155 @@
+"""The line ledger: every line and realtime byte sent to one controller, with who sent it.
+
+Grbl answers every line it reads with exactly one `ok` or `error:N`, in the order the lines
+arrived, and drops bytes that reach a full RX ring (firmware-facts §5.1). So one place must count
+the bytes of every unanswered line against the controller's RX buffer, whoever wrote the line,
+and hand each reply to the owner of the oldest unanswered line. That place is this ledger.
+
+Owners are short names: `handshake`, `engine`, `console`, or `foreign:NAME` for a sender whose
+lines smoothjog forwards without having written them (a second program on the same controller).
+Status reports, alarms, `[MSG:]` and banners belong to nobody; the host fans them out to all.
+
+Pure bookkeeping: no I/O, no clock (the caller passes `now_s`).
+"""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass, field
+
+from smoothjog.core.errors import CoreError
+from smoothjog.core.firmware import GRBL
+
+#: Grbl 1.1h's RX ring, assumed until the handshake's `$I` says otherwise.
+DEFAULT_RX_BYTES = GRBL.rx_buffer_bytes
+
+HANDSHAKE = "handshake"
+ENGINE = "engine"
+CONSOLE = "console"
+FOREIGN_PREFIX = "foreign:"
+
+
+class LedgerError(CoreError):
+    """A line was recorded that does not fit in the controller's RX buffer."""
+
+
+def line_cost_bytes(text: str) -> int:
+    """RX-buffer bytes a line takes: its ASCII bytes plus the single `\\n` the link appends."""
+    return len(text.encode("ascii", errors="replace")) + 1
+
+
+def foreign(name: str) -> str:
+    """The owner name of a sender whose lines are forwarded, not written, by smoothjog."""
+    return FOREIGN_PREFIX + name
+
+
+@dataclass(eq=False, slots=True)
+class Entry:
+    """One line on its way to the controller or waiting for its reply."""
+
+    owner: str
+    text: str
+    cost: int
+    sent_s: float
+    #: Whatever the owner wants back with the reply (the engine keeps its line's kind here).
+    tag: object = None
+
+
+@dataclass
+class LedgerStats:
+    """Counters for tests, logs and the benchmark."""
+
+    lines: collections.Counter[str] = field(default_factory=collections.Counter)
+    realtime: collections.Counter[str] = field(default_factory=collections.Counter)
+    replies: collections.Counter[str] = field(default_factory=collections.Counter)
+    #: Replies that arrived with no line waiting: another writer bypassing the ledger, or a
+    #: reply to a line sent before the controller reset.
+    unowned_replies: int = 0
+    #: Lines dropped unanswered because the controller reset.
+    lost_to_reset: int = 0
+
+
+class Ledger:
+    """Unanswered lines of every owner, oldest first, counted against the RX buffer."""
+
+    def __init__(self, capacity_bytes: int = DEFAULT_RX_BYTES) -> None:
+        """An empty ledger for a controller whose RX buffer holds capacity_bytes."""
+        self._capacity_bytes = DEFAULT_RX_BYTES
+        self.capacity_bytes = capacity_bytes
+        self._entries: collections.deque[Entry] = collections.deque()
+        self._in_flight_bytes = 0
+        self.stats = LedgerStats()
+
+    @property
+    def capacity_bytes(self) -> int:
+        """The controller's RX buffer size in bytes."""
+        return self._capacity_bytes
+
+    @capacity_bytes.setter
+    def capacity_bytes(self, value: int) -> None:
+        if value < 2:
+            raise LedgerError(
+                f"an RX buffer of {value} bytes cannot hold any line: the controller reported"
+                " an impossible size"
+            )
+        self._capacity_bytes = value
+
+    @property
+    def in_flight_bytes(self) -> int:
+        """Bytes sent and not yet answered, all owners together."""
+        return self._in_flight_bytes
+
+    @property
+    def free_bytes(self) -> int:
+        """Bytes that may still be sent before a reply is needed."""
+        return self._capacity_bytes - self._in_flight_bytes
+
+    def fits(self, text: str) -> bool:
+        """True when text can be sent now without overrunning the RX buffer."""
+        return line_cost_bytes(text) <= self.free_bytes
+
+    def record_line(self, owner: str, text: str, now_s: float, tag: object = None) -> Entry:
+        """Count a line as sent by owner; LedgerError (nothing counted) if it does not fit."""
+        cost = line_cost_bytes(text)
+        if cost > self.free_bytes:
+            raise LedgerError(
+                f"{owner}'s line {text!r} needs {cost} bytes but only {self.free_bytes} of the"
+                f" controller's {self._capacity_bytes}-byte RX buffer are free"
+            )
+        entry = Entry(owner, text, cost, now_s, tag)
+        self._entries.append(entry)
+        self._in_flight_bytes += cost
+        self.stats.lines[owner] += 1
+        return entry
+
+    def record_realtime(self, owner: str, byte: bytes) -> None:
+        """Note a realtime byte sent by owner: it takes no room in the RX buffer."""
+        self.stats.realtime[owner] += 1
+
+    def on_reply(self) -> Entry | None:
+        """An `ok`/`error` arrived: release and return the oldest unanswered line, if any."""
+        if not self._entries:
+            self.stats.unowned_replies += 1
+            return None
+        entry = self._entries.popleft()
+        self._in_flight_bytes -= entry.cost
+        self.stats.replies[entry.owner] += 1
+        return entry
+
+    def outstanding(self, owner: str | None = None) -> tuple[Entry, ...]:
+        """The unanswered lines (of one owner, or of all), oldest first."""
+        if owner is None:
+            return tuple(self._entries)
+        return tuple(e for e in self._entries if e.owner == owner)
+
+    def waiting(self, owner: str) -> int:
+        """How many of owner's lines wait for a reply."""
+        return sum(1 for e in self._entries if e.owner == owner)
+
+    def reset(self) -> list[Entry]:
+        """The controller reset (its RX buffer is empty): drop and return every entry."""
+        dropped = list(self._entries)
+        self._entries.clear()
+        self._in_flight_bytes = 0
+        self.stats.lost_to_reset += len(dropped)
+        return dropped

@@ -1,0 +1,352 @@
+"""Tracks the jogs sent as one path in machine mm, and where along it the machine should be now.
+
+The estimate runs the firmware's own kinematics along the path (accelerate to each jog's speed,
+brake for junctions, slower jogs and the end of the queue) and is pulled onto each status
+report. Distances along the path are `x_mm`, from the start of the first jog sent.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from smoothjog.core import increments as inc
+from smoothjog.core.units import Vec, norm, unit
+
+#: Distance of finished path kept behind the estimate (a stop is judged against the path ahead).
+PATH_KEEP_MM = 20.0
+#: At most this many jogs are remembered (a slow jog makes many short ones); far more than
+#: the planner can hold, so every jog not yet run is always kept.
+PATH_KEEP_SEGMENTS = 96
+
+
+@dataclass
+class PathSeg:
+    """One jog sent: where it starts and ends in machine mm, and its speed."""
+
+    start_mm: Vec
+    end_mm: Vec
+    length_mm: float
+    speed_mm_s: float
+    accel_mm_s2: float
+    x0_mm: float  # distance along the path where this jog starts
+    acked: bool = False
+    entry_cap_mm_s: float = 0.0  # fastest the planner lets the machine enter it (junction)
+
+
+class PathTracker:
+    """The planned path and the estimated progress (x_est_mm, v_est_mm_s) along it."""
+
+    def __init__(
+        self,
+        steps_per_mm: Vec,
+        accel_mm_s2: Vec,
+        junction_deviation_mm: float,
+        committed_s: float,
+    ) -> None:
+        """committed_s: time of segments the firmware has committed ahead of the steppers."""
+        self.steps_per_mm = steps_per_mm
+        self.accel_mm_s2 = accel_mm_s2
+        self.junction_deviation_mm = junction_deviation_mm
+        self.committed_s = committed_s
+        self.path: list[PathSeg] = []
+        self.end_mm: Vec | None = None  # end of the last jog sent (machine mm)
+        self.x_est_mm = 0.0  # estimated machine progress along the path
+        self.v_est_mm_s = 0.0
+        self.est_s = 0.0  # when the estimate was last advanced
+        self.moving_since_ack = False  # the estimate runs only once a jog has its ok
+
+    def use_machine(
+        self, steps_per_mm: Vec, accel_mm_s2: Vec, junction_deviation_mm: float
+    ) -> None:
+        """Take new machine limits (after a re-handshake)."""
+        self.steps_per_mm = steps_per_mm
+        self.accel_mm_s2 = accel_mm_s2
+        self.junction_deviation_mm = junction_deviation_mm
+
+    # ----------------------------------------------------------------- the path
+    def begin(self, start_mm: Vec, now_s: float) -> None:
+        """Start a new path at start_mm with the machine at rest there."""
+        self.path.clear()
+        self.end_mm = start_mm
+        self.x_est_mm = 0.0
+        self.v_est_mm_s = 0.0
+        self.est_s = now_s
+
+    def drop(self) -> None:
+        """Forget the path; nothing more follows it (the estimate is left as it was)."""
+        self.path.clear()
+        self.end_mm = None
+
+    def reset(self) -> None:
+        """Forget the path and the estimate (a stop is complete)."""
+        self.drop()
+        self.x_est_mm = 0.0
+        self.v_est_mm_s = 0.0
+
+    def append(self, seg: PathSeg) -> None:
+        """Add a sent jog to the path, with the speed the planner allows at its start."""
+        if self.path:
+            prev = self.path[-1]
+            seg.entry_cap_mm_s = min(
+                seg.speed_mm_s, prev.speed_mm_s, self.junction_speed_mm_s(prev, seg)
+            )
+        self.path.append(seg)
+        self.end_mm = seg.end_mm
+
+    def remove(self, seg: PathSeg) -> None:
+        """Take out a jog the controller rejected."""
+        if seg in self.path:
+            self.path.remove(seg)
+
+    def ack(self, seg: PathSeg, now_s: float) -> None:
+        """The controller planned this jog; the first ok starts the estimate."""
+        seg.acked = True
+        if not self.moving_since_ack:
+            self.moving_since_ack = True
+            self.est_s = now_s
+
+    def length_mm(self) -> float:
+        """Distance along the path to the end of the last jog sent."""
+        if not self.path:
+            return 0.0
+        last = self.path[-1]
+        return last.x0_mm + last.length_mm
+
+    def queued_mm(self) -> float:
+        """Path still ahead of the estimate."""
+        return max(self.length_mm() - self.x_est_mm, 0.0)
+
+    def blocks_in_planner(self) -> int:
+        """Jogs sent whose end the machine has not yet reached, less those already committed."""
+        committed_end = self.x_est_mm + self.v_est_mm_s * self.committed_s
+        count = 0
+        for seg in reversed(self.path):  # queued jogs are at the end; stop at the first done
+            if seg.x0_mm + seg.length_mm <= committed_end:
+                break
+            count += 1
+        return count
+
+    def longest_queued_s(self, block_s: float) -> float:
+        """Duration of the longest jog not yet finished, or block_s if that is longer."""
+        longest_s = block_s
+        for seg in reversed(self.path):  # the queued jogs are at the end of the path
+            if seg.x0_mm + seg.length_mm <= self.x_est_mm:
+                break
+            if seg.speed_mm_s > 0.0:
+                longest_s = max(longest_s, seg.length_mm / seg.speed_mm_s)
+        return longest_s
+
+    def prune(self) -> None:
+        """Forget jogs the machine finished long ago (the path would grow without end)."""
+        keep_from = self.x_est_mm - PATH_KEEP_MM
+        # Never forget what the next status reports can still show: their position is a few
+        # milliseconds old, so keep well over that much path behind the estimate.
+        recent_from = self.x_est_mm - (1.0 + self.v_est_mm_s * 0.3)
+        drop = 0
+        while drop < len(self.path) - 1 and (
+            self.path[drop].x0_mm + self.path[drop].length_mm < keep_from
+            or (
+                len(self.path) - drop > PATH_KEEP_SEGMENTS
+                and self.path[drop].x0_mm + self.path[drop].length_mm < recent_from
+            )
+        ):
+            drop += 1
+        if drop:
+            del self.path[:drop]
+
+    def seg_index_at(self, x_mm: float) -> int | None:
+        """Index of the path segment containing x_mm (bisect: the path is sorted by x0)."""
+        path = self.path
+        i = bisect.bisect_right(path, x_mm, key=lambda seg: seg.x0_mm) - 1
+        if 0 <= i < len(path) and x_mm < path[i].x0_mm + path[i].length_mm:
+            return i
+        return None
+
+    def seg_at(self, x_mm: float) -> PathSeg | None:
+        """The path segment containing x_mm, if any."""
+        i = self.seg_index_at(x_mm)
+        return None if i is None else self.path[i]
+
+    def point_at(self, x_mm: float) -> Vec:
+        """The machine position x_mm along the path (clamped to its ends)."""
+        for seg in self.path:
+            if x_mm <= seg.x0_mm + seg.length_mm or seg is self.path[-1]:
+                f = (
+                    0.0
+                    if seg.length_mm == 0
+                    else min(max((x_mm - seg.x0_mm) / seg.length_mm, 0), 1)
+                )
+                return tuple(s + (e - s) * f for s, e in zip(seg.start_mm, seg.end_mm, strict=True))
+        return self.end_mm or ()
+
+    # ----------------------------------------------------------------- the planner's limits
+    def junction_speed_mm_s(self, prev: PathSeg, seg: PathSeg) -> float:
+        """Grbl's junction-deviation speed limit between two jogs (firmware-facts §4.3)."""
+        u0 = unit(tuple(e - s for s, e in zip(prev.start_mm, prev.end_mm, strict=True)))
+        u1 = unit(tuple(e - s for s, e in zip(seg.start_mm, seg.end_mm, strict=True)))
+        return math.sqrt(
+            inc.junction_speed_sqr(u0, u1, self.accel_mm_s2, self.junction_deviation_mm)
+        )
+
+    def speed_cap_mm_s(self, seg_index: int) -> float:
+        """The fastest the machine can be at the estimate, braking for what lies ahead.
+
+        Grbl plans so that every junction and slower block ahead is met at its allowed speed,
+        and the end of the queue at rest; the machine cannot be faster than that.
+        """
+        x = self.x_est_mm
+        path = self.path
+        seg = path[seg_index]
+        a = seg.accel_mm_s2
+        cap = seg.speed_mm_s
+        reach_mm = cap * cap / (2.0 * a)
+        for nxt in path[seg_index + 1 :]:
+            ahead = nxt.x0_mm - x
+            if ahead > reach_mm:
+                break
+            cap = min(cap, math.sqrt(nxt.entry_cap_mm_s**2 + 2.0 * a * max(ahead, 0.0)))
+        end_x = path[-1].x0_mm + path[-1].length_mm
+        return min(cap, math.sqrt(2.0 * a * max(end_x - x, 0.0)))
+
+    # ----------------------------------------------------------------- the estimate
+    def update_estimate(self, now_s: float) -> None:
+        """Advance the estimated progress along the path with the firmware's own kinematics."""
+        if not self.path or not self.moving_since_ack:
+            self.est_s = now_s
+            return
+        dt = now_s - self.est_s
+        if dt <= 0.0:
+            return
+        self.est_s = now_s
+        # Integrate in small steps so braking at the end of the queue is followed closely.
+        steps = max(1, math.ceil(dt / 0.002))
+        h = dt / steps
+        end_x = self.length_mm()
+        for _ in range(steps):
+            index = self.seg_index_at(self.x_est_mm)
+            if index is None:
+                self.v_est_mm_s = 0.0
+                self.x_est_mm = end_x
+                return
+            a = self.path[index].accel_mm_s2
+            v_cap = self.speed_cap_mm_s(index)
+            if self.v_est_mm_s < v_cap:
+                self.v_est_mm_s = min(v_cap, self.v_est_mm_s + a * h)
+            else:
+                self.v_est_mm_s = max(v_cap, self.v_est_mm_s - a * h)
+            self.x_est_mm = min(self.x_est_mm + self.v_est_mm_s * h, end_x)
+
+    def correct_estimate(self, mpos: Vec, age_s: float) -> bool:
+        """Pull the estimate onto the reported position (projected on the path).
+
+        A path that doubles back passes the same point twice, so among the segments the report
+        lies on, the one nearest the current estimate wins. Returns True when the report lies
+        off every jog sent (the estimate is then left alone); False otherwise, also when
+        there is nothing to correct yet.
+        """
+        if not self.path or not self.moving_since_ack:
+            return False
+        tolerance_mm = 2.0 / min(self.steps_per_mm) + 1e-6
+        best: float | None = None
+        for seg in self.path:
+            d, along = project(mpos, seg.start_mm, seg.end_mm)
+            if d > tolerance_mm:
+                continue
+            x = seg.x0_mm + along
+            if best is None or abs(x - self.x_est_mm) < abs(best - self.x_est_mm):
+                best = x
+        if best is None:
+            return True
+        # The report was built before its bytes crossed the wire: move it forward by that age.
+        ahead = self.v_est_mm_s * age_s
+        self.x_est_mm = min(best + ahead, self.length_mm())
+        return False
+
+    def arrive_at_end(self) -> None:
+        """The machine is known to rest at the end of the path."""
+        self.x_est_mm = self.length_mm()
+        self.v_est_mm_s = 0.0
+
+    def at_rest_at_end(self) -> bool:
+        """True when the estimate has reached the end of the path and stopped."""
+        return self.x_est_mm >= self.length_mm() - 1e-9 and self.v_est_mm_s == 0.0
+
+    def stop_point_mm(self) -> Vec:
+        """Where the machine would come to rest if the jog were released now (path not empty)."""
+        v = self.v_est_mm_s
+        seg = self.seg_at(self.x_est_mm) or self.path[-1]
+        brake = v * self.committed_s + v * v / (2.0 * seg.accel_mm_s2) if v > 0 else 0.0
+        return self.point_at(min(self.x_est_mm + brake, self.length_mm()))
+
+    def tracking_error(self, mpos: Vec, *, cancelled: bool) -> tuple[float, float]:
+        """Tracked minus real, in mm and in steps of the worst axis.
+
+        After a queue that ran out, it is the miss of the planned end; after a cancel, the miss
+        of the nearest point of the queued path (the stop must lie on it, firmware-facts §3.1).
+        Steps are counted per axis because the firmware rounds each axis to its own steps.
+        """
+        if not self.path:
+            return 0.0, 0.0
+        spm = self.steps_per_mm
+        if not cancelled:
+            ref = self.path[-1].end_mm
+            steps = max(abs(r - m) * k for r, m, k in zip(ref, mpos, spm, strict=True))
+            return math.dist(ref, mpos), steps
+        best_steps, best_ref = math.inf, mpos
+        for seg in self.path:
+            steps, ref = nearest_in_steps(mpos, seg.start_mm, seg.end_mm, spm)
+            if steps < best_steps:
+                best_steps, best_ref = steps, ref
+        return math.dist(best_ref, mpos), best_steps
+
+    # ----------------------------------------------------------------- the step grid
+    def on_step_grid(self, mpos: Sequence[float]) -> Vec:
+        """A reported position (3 decimals) put back on the step grid Grbl counts in.
+
+        After a stop Grbl's parser position is the exact step count; the report rounds it.
+        Starting a G91 chain from the rounded value would shift every target by up to
+        0.0005 mm, enough to meet error:15 at the edge of the envelope.
+        """
+        return tuple(round(p * spm) / spm for p, spm in zip(mpos, self.steps_per_mm, strict=True))
+
+    def steps_from(self, a: Sequence[float], b: Sequence[float]) -> float:
+        """Distance between two positions in steps of the worst axis."""
+        return max(abs(x - y) * spm for x, y, spm in zip(a, b, self.steps_per_mm, strict=True))
+
+
+def project(p: Vec, a: Vec, b: Vec) -> tuple[float, float]:
+    """Distance from p to segment ab, and how far along ab the closest point lies."""
+    ab = tuple(y - x for x, y in zip(a, b, strict=True))
+    length = norm(ab)
+    if length == 0.0:
+        return math.dist(p, a), 0.0
+    t = sum((pi - ai) * d for pi, ai, d in zip(p, a, ab, strict=True)) / (length * length)
+    t = min(max(t, 0.0), 1.0)
+    closest = tuple(ai + d * t for ai, d in zip(a, ab, strict=True))
+    return math.dist(p, closest), t * length
+
+
+def nearest_in_steps(p: Vec, a: Vec, b: Vec, steps_per_mm: Vec) -> tuple[float, Vec]:
+    """The point of segment ab nearest to p when distance is the worst axis counted in steps.
+
+    The firmware rounds each axis to its own step grid, so "within one step" is per axis. The
+    distance along the segment is convex in t; a ternary search finds its minimum.
+    """
+
+    def at(t: float) -> tuple[float, Vec]:
+        q = tuple(ai + (bi - ai) * t for ai, bi in zip(a, b, strict=True))
+        err = max(abs(qi - pi) * k for qi, pi, k in zip(q, p, steps_per_mm, strict=True))
+        return err, q
+
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        m1 = lo + (hi - lo) / 3
+        m2 = hi - (hi - lo) / 3
+        if at(m1)[0] <= at(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    return at((lo + hi) / 2)

@@ -1,0 +1,110 @@
+"""The line ledger: RX byte counting across owners, replies to the oldest line's owner, resets."""
+
+from __future__ import annotations
+
+import pytest
+
+from smoothjog.core.ledger import (
+    CONSOLE,
+    ENGINE,
+    HANDSHAKE,
+    Ledger,
+    LedgerError,
+    foreign,
+    line_cost_bytes,
+)
+
+
+def test_a_line_costs_its_bytes_and_one_newline() -> None:
+    ledger = Ledger()
+    ledger.record_line(ENGINE, "$J=G91X1F100", 0.0)
+    assert ledger.in_flight_bytes == line_cost_bytes("$J=G91X1F100") == 13
+    assert ledger.free_bytes == 128 - 13
+
+
+@pytest.mark.parametrize(
+    ("capacity", "in_flight", "line", "fits"),
+    [
+        (128, [], "x" * 127, True),
+        (128, [], "x" * 128, False),
+        (128, ["x" * 63], "y" * 63, True),
+        (128, ["x" * 63], "y" * 64, False),
+        (128, ["x" * 63, "y" * 63], "", False),
+        (1024, ["x" * 500], "y" * 500, True),
+        (2, [""], "", True),
+        (2, ["", ""], "", False),
+    ],
+)
+def test_fits_counts_every_owner(
+    capacity: int, in_flight: list[str], line: str, fits: bool
+) -> None:
+    """Room is shared: lines of other owners take it as much as the engine's own."""
+    ledger = Ledger(capacity)
+    for k, text in enumerate(in_flight):
+        ledger.record_line((ENGINE, foreign("cncjs"))[k % 2], text, 0.0)
+    assert ledger.fits(line) is fits
+
+
+def test_a_line_that_does_not_fit_is_refused_and_not_counted() -> None:
+    ledger = Ledger(16)
+    ledger.record_line(CONSOLE, "x" * 10, 0.0)
+    with pytest.raises(LedgerError, match="only 5 of"):
+        ledger.record_line(ENGINE, "y" * 5, 0.0)
+    assert [e.text for e in ledger.outstanding()] == ["x" * 10]
+    assert ledger.in_flight_bytes == 11
+
+
+def test_each_reply_goes_to_the_owner_of_the_oldest_line() -> None:
+    """Grbl answers in order, whoever wrote the line: a foreign `$G` between two jogs."""
+    ledger = Ledger()
+    ledger.record_line(ENGINE, "$J=G91X1F100", 0.0, tag="first")
+    ledger.record_line(foreign("cncjs"), "$G", 0.001)
+    ledger.record_line(ENGINE, "$J=G91X1F100", 0.002, tag="second")
+    owners = []
+    for _ in range(3):
+        entry = ledger.on_reply()
+        assert entry is not None
+        owners.append((entry.owner, entry.tag))
+    assert owners == [(ENGINE, "first"), ("foreign:cncjs", None), (ENGINE, "second")]
+    assert ledger.in_flight_bytes == 0
+    assert ledger.stats.replies == {ENGINE: 2, "foreign:cncjs": 1}
+
+
+def test_a_reply_with_no_line_waiting_is_counted_not_raised() -> None:
+    ledger = Ledger()
+    assert ledger.on_reply() is None
+    assert ledger.stats.unowned_replies == 1
+
+
+def test_outstanding_and_waiting_by_owner() -> None:
+    ledger = Ledger()
+    ledger.record_line(HANDSHAKE, "$I", 0.0)
+    ledger.record_line(ENGINE, "G4P0", 0.0)
+    assert [e.text for e in ledger.outstanding(ENGINE)] == ["G4P0"]
+    assert ledger.waiting(HANDSHAKE) == 1
+    assert ledger.waiting(CONSOLE) == 0
+
+
+def test_a_reset_drops_everything_and_says_what() -> None:
+    """A controller reset empties its RX buffer: nothing is owed an answer any more."""
+    ledger = Ledger()
+    ledger.record_line(ENGINE, "$J=G91X1F100", 0.0)
+    ledger.record_line(CONSOLE, "$G", 0.0)
+    dropped = ledger.reset()
+    assert [e.owner for e in dropped] == [ENGINE, CONSOLE]
+    assert ledger.in_flight_bytes == 0
+    assert ledger.stats.lost_to_reset == 2
+    assert ledger.on_reply() is None
+
+
+def test_realtime_bytes_take_no_room() -> None:
+    ledger = Ledger()
+    ledger.record_realtime(ENGINE, b"\x85")
+    assert ledger.free_bytes == 128
+    assert ledger.stats.realtime == {ENGINE: 1}
+
+
+@pytest.mark.parametrize("capacity", [0, 1, -5])
+def test_an_impossible_rx_size_is_refused(capacity: int) -> None:
+    with pytest.raises(LedgerError, match="impossible"):
+        Ledger(capacity)
