@@ -1,4 +1,4 @@
-"""A PendantBackend that records every call with its loop-clock time and serves a scripted view.
+"""A PendantBackend that records every intent with its loop-clock time and serves a scripted view.
 
 It also integrates a crude motion (position follows the held jog, actual speed lags commanded)
 so the page has something alive to draw; it models nothing of Grbl.
@@ -10,6 +10,8 @@ import asyncio
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+
+from smoothjog.core.jogger import ContinuousIntent, GotoIntent, Intent, StepIntent
 
 AXES = ("X", "Y", "Z")
 
@@ -58,6 +60,8 @@ class RecordingBackend:
 
     def __init__(self, *, animate: bool = True) -> None:
         self.calls: list[Call] = []
+        #: Every intent exactly as the arbiter forwarded it, in order.
+        self.intents: list[Intent] = []
         self.view_state: dict[str, object] = default_view()
         self.animate = animate
         self.fail_on: set[str] = set()
@@ -76,19 +80,31 @@ class RecordingBackend:
 
     # -- PendantBackend ------------------------------------------------------------------------
 
-    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
-        """Record and hold the jog."""
-        self._record("jog_continuous", dict(axes), speed)
-        self._held = (dict(axes), speed)
+    def set_intent(self, intent: Intent) -> None:
+        """Record the intent under the name of what it does, and hold or release the jog.
 
-    def jog_step(self, axis: str, dist_mm: float) -> None:
-        """Record the step."""
-        self._record("jog_step", axis, dist_mm)
+        A non-neutral ContinuousIntent is recorded as "jog_continuous" (axes, speed), a
+        StepIntent as "jog_step" (axis, dist_mm), a StopIntent or a neutral ContinuousIntent (the
+        engine treats both as a stop) as "stop", a GotoIntent as "goto" (target).
+        """
+        self.intents.append(intent)
+        if isinstance(intent, ContinuousIntent) and not intent.is_neutral():
+            self._record("jog_continuous", dict(intent.axes), intent.speed)
+            self._held = (dict(intent.axes), intent.speed)
+        elif isinstance(intent, StepIntent):
+            self._record("jog_step", intent.axis, intent.dist_mm)
+        elif isinstance(intent, GotoIntent):
+            self._record("goto", dict(intent.target_mpos_mm))
+        else:
+            self._record("stop")
+            self._held = None
 
-    def stop(self) -> None:
-        """Record the stop and release the held jog."""
-        self._record("stop")
-        self._held = None
+    def can_jog(self) -> tuple[bool, str | None]:
+        """The scripted view's can_jog and reason (the state when it gives no reason)."""
+        if self.view_state.get("can_jog") is not False:
+            return True, None
+        reason = self.view_state.get("reason") or f"machine state is {self.view_state.get('state')}"
+        return False, str(reason)
 
     def view(self) -> Mapping[str, object]:
         """The scripted view, advanced by the crude motion when animate is on."""

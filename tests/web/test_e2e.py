@@ -8,7 +8,7 @@ firmware's physics plus generous slack for a shared machine's scheduling, never 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,9 +16,9 @@ from typing import Any
 import pytest_asyncio
 from bench import measure
 
-from smoothjog.core.jogger import JogTuning
+from smoothjog.core.jogger import ContinuousIntent, Intent, JogTuning
+from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
-from smoothjog.session import JogSession
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.web.session_backend import SessionBackend
 from tests.web.conftest import DESKTOP, PHONE, OpenPage, StartPendant
@@ -31,7 +31,7 @@ A_MM_S2 = 500.0
 class TimedBackend(SessionBackend):
     """The real backend, noting (in simulator time) when the page asked for what."""
 
-    def __init__(self, session: JogSession, link: SimLink) -> None:
+    def __init__(self, session: Host, link: SimLink) -> None:
         super().__init__(session)
         self.link = link
         self.calls: list[tuple[float, str]] = []
@@ -40,13 +40,10 @@ class TimedBackend(SessionBackend):
         """Simulator time now."""
         return self.link._sim.now_s()
 
-    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
-        self.calls.append((self.now_s(), "jog"))
-        super().jog_continuous(axes, speed)
-
-    def stop(self) -> None:
-        self.calls.append((self.now_s(), "stop"))
-        super().stop()
+    def set_intent(self, intent: Intent) -> None:
+        moving = isinstance(intent, ContinuousIntent) and not intent.is_neutral()
+        self.calls.append((self.now_s(), "jog" if moving else "stop"))
+        super().set_intent(intent)
 
     def first(self, name: str, after_s: float) -> float | None:
         """Time of the first call of name after after_s."""
@@ -58,7 +55,7 @@ class Machine:
     """A started session on the simulated hobby router with its pendant backend."""
 
     link: SimLink
-    session: JogSession
+    session: Host
     backend: TimedBackend
 
     def mpos(self) -> tuple[float, ...]:
@@ -88,7 +85,7 @@ async def machine() -> AsyncIterator[Machine]:
     """The simulated hobby router in real time, a jog session and its pendant backend."""
     link = SimLink(GrblFirmware(machine="hobby-router"))
     await link.open()
-    session = JogSession(link, tuning=JogTuning(link_margin_s=0.005))
+    session = Host(link, tuning=JogTuning(link_margin_s=0.005))
     await session.start()
     backend = TimedBackend(session, link)
     yield Machine(link, session, backend)

@@ -1,4 +1,4 @@
-"""Validation of the page's WebSocket messages and of the dead-man bookkeeping, no server."""
+"""Validation of the page's WebSocket messages and of the dead-man setting, no server."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import json
 
 import pytest
 
-from smoothjog.web.deadman import DeadMan
 from smoothjog.web.protocol import (
     JogMessage,
     PendantError,
@@ -19,6 +18,8 @@ from smoothjog.web.protocol import (
     parse_client_message,
     view_message,
 )
+from smoothjog.web.server import create_app
+from tests.web.recording import RecordingBackend
 
 AXES = ("X", "Y", "Z")
 
@@ -104,25 +105,7 @@ def test_view_message_replaces_non_finite_numbers_with_null() -> None:
     }
 
 
-def test_deadman_arms_on_feed_and_expires_after_the_window() -> None:
-    dm = DeadMan(0.15)
-    assert not dm.armed
-    assert not dm.expired(100.0)
-    dm.feed(10.0)
-    assert dm.armed
-    assert dm.deadline_s() == pytest.approx(10.15)
-    assert not dm.expired(10.149)
-    assert dm.expired(10.15)
-    dm.feed(10.1)  # a heartbeat pushes the deadline out
-    assert not dm.expired(10.2)
-    assert dm.expired(10.26)
-    dm.disarm()
-    assert not dm.armed
-    assert not dm.expired(1000.0)
-    assert dm.deadline_s() is None
-
-
 @pytest.mark.parametrize("window_s", [0.0, -1.0, float("nan")])
-def test_deadman_refuses_a_non_positive_window(window_s: float) -> None:
+def test_the_deadman_window_must_be_positive(window_s: float) -> None:
     with pytest.raises(PendantError, match="dead-man window must be positive"):
-        DeadMan(window_s)
+        create_app(RecordingBackend(), token=None, deadman_s=window_s)

@@ -13,8 +13,11 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
+from smoothjog.core.errors import JogBuildError
+from smoothjog.core.jogger import ContinuousIntent, StepIntent, StopIntent
+from smoothjog.inputs.base import Input, InputHandle
 from smoothjog.web.protocol import PendantError
-from smoothjog.web.server import STATIC_DIR, format_banner, run_pendant
+from smoothjog.web.server import STATIC_DIR, STEP_SPEED, format_banner, run_pendant
 from tests.web.conftest import Pendant, StartPendant
 from tests.web.recording import RecordingBackend
 
@@ -60,6 +63,17 @@ async def until_role(ws: aiohttp.ClientWebSocketResponse, role: str) -> None:
 async def send(ws: aiohttp.ClientWebSocketResponse, message: dict[str, Any] | str) -> None:
     """Send a message (a dict as JSON, a str as is)."""
     await ws.send_str(message if isinstance(message, str) else json.dumps(message))
+
+
+class Handwheel(Input):
+    """Another kind of input on the same arbiter as the pages."""
+
+    name = "test handwheel"
+    kind = "handwheel"
+    lease_s = None
+
+    async def run(self, handle: InputHandle) -> None:
+        return None
 
 
 # -- access ---------------------------------------------------------------------------------------
@@ -172,6 +186,7 @@ async def test_malformed_messages_get_an_error_and_the_socket_lives_on(
     await send(ws, {"type": "step", "axis": "Y", "dist_mm": -0.1})
     await p.backend.wait_for(lambda: p.backend.named("jog_step"), what="the step")
     assert p.backend.named("jog_step")[0].args == ("Y", -0.1)
+    assert p.backend.intents == [StepIntent("Y", -0.1, STEP_SPEED)]
     await ws.close()
 
 
@@ -187,7 +202,7 @@ async def test_intents_reach_the_backend(
     await send(ws, {"type": "stop"})
     await backend.wait_for(lambda: backend.named("stop"), what="the stop")
     assert [c.name for c in backend.calls] == ["set_speed_ratios", "jog_continuous", "stop"]
-    assert backend.calls[1].args == ({"X": 0.5}, 0.5)
+    assert backend.intents == [ContinuousIntent({"X": 0.5}, 0.5), StopIntent()]
     await ws.close()
 
 
@@ -201,9 +216,16 @@ async def test_a_watcher_cannot_jog_and_gets_control_when_the_jog_ends(
     second = await open_ws(http, p)
     role = await next_message(second, "role")
     assert role == {"type": "role", "role": "watcher", "controlled": True, "deadman_s": 2.0}
-    for message in (JOG_X, {"type": "step", "axis": "X", "dist_mm": 1}, {"type": "stop"}):
+    for message in (
+        JOG_X,
+        {"type": "step", "axis": "X", "dist_mm": 1},
+        {"type": "stop"},
+        {"type": "ratios", "ratios": {"Z": 0.5}},
+    ):
         await send(second, message)
-        assert "watching only" in (await next_message(second, "error"))["text"]
+        assert (await next_message(second, "error"))["text"] == (
+            "this pendant is watching only; press Take control to drive the machine"
+        )
     assert backend.calls == []
 
     await send(first, JOG_X)
@@ -268,11 +290,89 @@ async def test_a_failing_backend_is_answered_and_the_machine_stopped(
     await send(ws, JOG_X)
     assert "jog refused" in (await next_message(ws, "error"))["text"]
     assert backend.named("stop")
-    assert not p.hub.deadman.armed
+    assert not p.hub.arbiter.lease_armed
     backend.fail_on = {"view"}
     assert "machine view unavailable" in (await next_message(ws, "error"))["text"]
     backend.fail_on = set()
     assert (await next_message(ws, "view"))["state"] == "Idle"
+    await ws.close()
+
+
+async def test_a_failing_ratio_change_is_answered_and_the_machine_stopped(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(deadman_s=5.0)
+    backend: RecordingBackend = p.backend
+    backend.fail_on.add("set_speed_ratios")
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    await send(ws, {"type": "ratios", "ratios": {"Z": 0.5}})
+    text = (await next_message(ws, "error"))["text"]
+    assert text == "jog refused: recording backend told to fail on set_speed_ratios"
+    assert [c.name for c in backend.calls] == ["jog_continuous", "set_speed_ratios", "stop"]
+    assert not p.hub.arbiter.lease_armed
+    await ws.close()
+
+
+async def test_an_invalid_intent_is_refused_in_the_backends_words(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+
+    def refuse(intent: object) -> None:
+        raise JogBuildError("speed 0.001 gives 0.05 mm/min, below Grbl's 1 mm/min minimum")
+
+    backend.set_intent = refuse  # type: ignore[method-assign]
+    await send(ws, {"type": "step", "axis": "X", "dist_mm": 1})
+    assert (await next_message(ws, "error"))["text"] == (
+        "jog refused: speed 0.001 gives 0.05 mm/min, below Grbl's 1 mm/min minimum"
+    )
+    await ws.close()
+
+
+async def test_another_input_in_control_makes_every_page_a_watcher(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    ws = await open_ws(http, p)
+    assert (await next_message(ws, "role"))["role"] == "controller"
+    pad = p.hub.arbiter.attach(Handwheel())
+    pad.take_control()
+    role = await next_message(ws, "role")
+    assert role["role"] == "watcher"
+    assert role["controlled"] is True
+    assert p.hub.controller is None
+    pad.detach()
+    assert (await next_message(ws, "role"))["controlled"] is False
+    await ws.close()
+
+
+async def test_shutting_the_server_down_stops_a_page_that_was_jogging(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant(deadman_s=5.0)
+    backend: RecordingBackend = p.backend
+    ws = await open_ws(http, p)
+    await next_message(ws, "role")
+    await send(ws, JOG_X)
+    await backend.wait_for(lambda: backend.named("jog_continuous"), what="the jog")
+    # The stop must not wait for the page to answer the close (a stuck page may never).
+    page = p.hub.clients[0]
+    stopped_before_close: list[bool] = []
+    close = page.ws.close
+
+    async def observed_close(**kw: Any) -> bool:
+        stopped_before_close.append(bool(backend.named("stop")))
+        return await close(**kw)
+
+    page.ws.close = observed_close  # type: ignore[method-assign]
+    await p.hub.shutdown()
+    assert stopped_before_close[0] is True
+    assert p.hub.arbiter.controller is None
     await ws.close()
 
 

@@ -33,3 +33,7 @@ class SimError(SmoothjogError):
 
 class EngineError(SmoothjogError):
     """The jog engine hit a condition it cannot continue from without the user."""
+
+
+class InputRefused(SmoothjogError):  # noqa: N818 -- a refusal, not a fault; inputs catch it by name
+    """An input's intent was refused: not the controlling input, jogging disabled, or invalid."""

@@ -1,14 +1,16 @@
 """The contract between the pendant server and whatever drives the machine behind it.
 
-The server only ever calls these five methods, from its event loop thread, and never awaits
-them: each must return quickly (queue the work, do not wait for the controller). The jog engine
-and session implement it for real; tests implement it with a recorder.
+The server (and the arbiter it submits through) only ever calls these four methods, from the
+event loop thread, and never awaits them: each must return quickly (queue the work, do not wait
+for the controller). The jog session implements it for real; tests implement it with a recorder.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Protocol, runtime_checkable
+
+from smoothjog.core.jogger import Intent
 
 #: The keys of the snapshot `PendantBackend.view()` returns; docs/pendant.md explains each one.
 VIEW_KEYS: frozenset[str] = frozenset(
@@ -40,22 +42,23 @@ VIEW_KEYS: frozenset[str] = frozenset(
 
 @runtime_checkable
 class PendantBackend(Protocol):
-    """What the pendant needs from the machine side; every method returns without waiting."""
+    """What the pendant needs from the machine side; every method returns without waiting.
 
-    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
-        """Jog by stick deflection per axis in [-1, 1] at a global speed fraction in (0, 1].
+    It is also the arbiter's IntentSink (set_intent, can_jog): the page's intents reach it only
+    through the arbiter, which decides who controls and runs the dead-man.
+    """
 
-        Called on every change of intent and again as the heartbeat (at least every 40 ms)
-        while the jog is held; the deflection is already deadzoned and expo-shaped.
+    def set_intent(self, intent: Intent) -> None:
+        """Take the newest intent; raises JogBuildError in words for one the machine cannot do.
+
+        A held continuous jog arrives on every change and again as the heartbeat (at least
+        every 40 ms); a release arrives as a neutral ContinuousIntent or a StopIntent, and a
+        StopIntent may come when nothing moves and must then be harmless.
         """
         ...
 
-    def jog_step(self, axis: str, dist_mm: float) -> None:
-        """Queue an exact relative move of one axis; steps run in the order they arrive."""
-        ...
-
-    def stop(self) -> None:
-        """Return to neutral: cancel every queued jog with the full cancel handshake."""
+    def can_jog(self) -> tuple[bool, str | None]:
+        """Whether a new jog may start now, and if not why, in words."""
         ...
 
     def view(self) -> Mapping[str, object]:

@@ -3,12 +3,12 @@
 aiohttp was chosen because it is a mature asyncio HTTP server with first-class WebSocket
 support, so the pendant shares the event loop (and its clock) with the jog session.
 
-Safety rules enforced here (docs/pendant.md explains them for users):
-- one controlling client at a time; the others watch read-only;
-- a held continuous jog is stopped when its heartbeat is silent for `deadman_s` (loop clock)
-  or when the controlling WebSocket closes;
-- every request passes the guard middleware: Host (loopback mode), pairing token (LAN mode),
-  and for /ws the Origin, which must be the host the page was served from.
+Each connected page is one input of the session's Arbiter (smoothjog.arbiter), which enforces
+the safety rules for every input (docs/pendant.md explains them for users): one controlling
+input at a time, the others watch; a held jog stops when the page's heartbeat is silent for
+`deadman_s` (its lease) or when the controlling page's WebSocket closes. Enforced here: every
+request passes the guard middleware: Host (loopback mode), pairing token (LAN mode), and for
+/ws the Origin, which must be the host the page was served from.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import logging
 import secrets
 import socket
 import sys
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -29,8 +29,12 @@ from typing import Final
 import segno
 from aiohttp import WSMsgType, web
 
+from smoothjog.arbiter import Arbiter
+from smoothjog.config import DEFAULT_HTTP_PORT
+from smoothjog.core.errors import InputRefused
+from smoothjog.core.jogger import ContinuousIntent, Intent, StepIntent, StopIntent
+from smoothjog.inputs.base import Input, InputHandle, Notice
 from smoothjog.web.backend import PendantBackend
-from smoothjog.web.deadman import DeadMan
 from smoothjog.web.protocol import (
     MAX_MESSAGE_BYTES,
     JogMessage,
@@ -56,6 +60,8 @@ TOKEN_COOKIE: Final = "smoothjog_token"
 #: A send that cannot complete in this time means the client is stuck; it is dropped.
 SEND_TIMEOUT_S: Final = 1.0
 DEFAULT_AXES: Final = ("X", "Y", "Z")
+#: Step jogs run at this fraction of the top jog speed (fine positioning wants control, not haste).
+STEP_SPEED: Final = 0.5
 
 _SECURITY_HEADERS: Final = {
     # Everything is served from here; nothing may be framed (click-jacking) or fetched elsewhere.
@@ -67,14 +73,6 @@ _SECURITY_HEADERS: Final = {
     "Referrer-Policy": "no-referrer",
     "Cache-Control": "no-cache",
 }
-
-
-@dataclass(eq=False)
-class _Client:
-    """One connected page."""
-
-    ws: web.WebSocketResponse
-    label: str
 
 
 @dataclass
@@ -119,170 +117,168 @@ class _Policy:
 
 
 @dataclass(eq=False)
+class WebInput(Input):
+    """One connected page: an input of kind "web" whose lease is the hub's dead-man window."""
+
+    hub: PendantHub
+    ws: web.WebSocketResponse
+    name: str
+    lease_s: float | None
+    kind: str = "web"
+    handle: InputHandle | None = None
+
+    async def run(self, handle: InputHandle) -> None:
+        """Greet the page, then handle its frames until its socket closes."""
+        self.handle = handle
+        await self.hub.greet(self)
+        async for msg in self.ws:
+            if msg.type == WSMsgType.TEXT:
+                await self.hub.on_text(self, msg.data)
+            elif msg.type == WSMsgType.BINARY:
+                await self.hub.refuse(self, "binary frames are not understood; send JSON text")
+
+    def notice(self, notice: Notice) -> None:
+        """Tell the page why its jog stopped (sent in the background: the arbiter cannot wait)."""
+        text = (
+            f"jog stopped: no heartbeat from this pendant for {notice.silent_s * 1000:.0f} ms "
+            "(weak Wi-Fi or a busy device?)"
+        )
+        _spawn(self.hub.send(self, dumps(error_message(text))))
+
+
+@dataclass(eq=False)
 class PendantHub:
-    """The clients, their roles, the dead-man and the view stream around one backend."""
+    """The pages, their roles and the view stream around one backend; the arbiter rules."""
 
     backend: PendantBackend
-    deadman: DeadMan
-    clients: list[_Client] = field(default_factory=list)
-    controller: _Client | None = None
+    arbiter: Arbiter
+    deadman_s: float = 0.15
+    clients: list[WebInput] = field(default_factory=list)
     axes: tuple[str, ...] = DEFAULT_AXES
-    deadman_trips: int = 0
-    _timer: asyncio.TimerHandle | None = None
     _last_sent: dict[str, object] | None = None
     _last_text: str | None = None
     _last_view_error: str | None = None
+    _roles_dirty: bool = False
     _count: int = 0
 
-    # -- clients and roles -------------------------------------------------------------------
+    def __post_init__(self) -> None:
+        """Check the dead-man window and follow the arbiter's changes of control."""
+        if not self.deadman_s > 0.0:
+            raise PendantError(
+                f"dead-man window must be positive, got {self.deadman_s!r} s; "
+                "pass e.g. deadman_s=0.15 to create_app"
+            )
+        self.arbiter.add_listener(self._control_changed)
 
-    async def add(self, ws: web.WebSocketResponse, peer: str) -> _Client:
-        """Register a new page; it controls if nobody does, else it watches."""
+    @property
+    def controller(self) -> WebInput | None:
+        """The page in control, or None (nobody, or another kind of input, controls)."""
+        controller = self.arbiter.controller
+        return controller if isinstance(controller, WebInput) else None
+
+    @property
+    def deadman_trips(self) -> int:
+        """How many held jogs the dead-man stopped (the arbiter counts them for every input)."""
+        return self.arbiter.trips
+
+    # -- pages and roles ---------------------------------------------------------------------
+
+    def connect(self, ws: web.WebSocketResponse, peer: str) -> WebInput:
+        """A new page, listed here; it becomes an input when the arbiter runs it."""
         self._count += 1
-        client = _Client(ws=ws, label=f"#{self._count} {peer}")
-        self.clients.append(client)
-        if self.controller is None:
-            self.controller = client
-        log.info("pendant client %s connected", client.label)
-        await self._send_roles()
-        if self._last_text is not None:
-            await self._send(client, self._last_text)
-        return client
+        page = WebInput(hub=self, ws=ws, name=f"#{self._count} {peer}", lease_s=self.deadman_s)
+        self.clients.append(page)
+        log.info("pendant client %s connected", page.name)
+        return page
 
-    async def remove(self, client: _Client) -> None:
-        """Forget a page; if it was in control, stop the machine and free the control."""
-        if client in self.clients:
-            self.clients.remove(client)
-        log.info("pendant client %s disconnected", client.label)
-        if client is self.controller:
-            self.controller = None
-            self._release()
-            # A closed controller may have left steps queued; nobody is watching over them now.
-            self._call_stop("controller disconnected")
+    async def greet(self, page: WebInput) -> None:
+        """Send a page just attached its role (all pages theirs if control changed) and the view."""
+        if self._roles_dirty:
+            await self._flush_roles()
+        else:
+            await self._send_roles(only=page)
+        if self._last_text is not None:
+            await self.send(page, self._last_text)
+
+    async def disconnect(self, page: WebInput) -> None:
+        """Forget a page the arbiter detached (it stopped the machine if the page drove it)."""
+        if page in self.clients:
+            self.clients.remove(page)
+        log.info("pendant client %s disconnected", page.name)
+        await self._flush_roles()
+
+    def _control_changed(self) -> None:
+        # The arbiter calls this synchronously; the pages hear of it as soon as the loop can.
+        self._roles_dirty = True
+        _spawn(self._flush_roles())
+
+    async def _flush_roles(self) -> None:
+        if self._roles_dirty:
+            self._roles_dirty = False
             await self._send_roles()
 
-    async def _send_roles(self) -> None:
-        controlled = self.controller is not None
-        for client in list(self.clients):
-            role = "controller" if client is self.controller else "watcher"
-            message = role_message(role, controlled=controlled, deadman_s=self.deadman.window_s)
-            await self._send(client, dumps(message))
+    async def _send_roles(self, only: WebInput | None = None) -> None:
+        controller = self.arbiter.controller
+        controlled = controller is not None
+        for page in [only] if only is not None else list(self.clients):
+            role = "controller" if page is controller else "watcher"
+            message = role_message(role, controlled=controlled, deadman_s=self.deadman_s)
+            await self.send(page, dumps(message))
 
     # -- intents -----------------------------------------------------------------------------
 
-    async def refuse(self, client: _Client, text: str) -> None:
+    async def refuse(self, page: WebInput, text: str) -> None:
         """Answer a page with an error in words."""
-        await self._send(client, dumps(error_message(text)))
+        await self.send(page, dumps(error_message(text)))
 
-    async def on_text(self, client: _Client, text: str) -> None:
+    async def on_text(self, page: WebInput, text: str) -> None:
         """Handle one text frame from a page; every failure is answered, none propagates."""
         try:
             message = parse_client_message(text, self.axes)
         except PendantMessageError as exc:
-            await self.refuse(client, str(exc))
+            await self.refuse(page, str(exc))
             return
+        handle = page.handle
+        assert handle is not None, "a page sends frames only while it runs as an input"
         if isinstance(message, TakeControlMessage):
-            await self._take_control(client)
+            await self._take_control(page, handle)
             return
-        if client is not self.controller:
+        if not handle.in_control:
             await self.refuse(
-                client, "this pendant is watching only; press Take control to drive the machine"
+                page, "this pendant is watching only; press Take control to drive the machine"
             )
             return
+        if isinstance(message, RatiosMessage):
+            await self._set_ratios(page, handle, message)
+            return
         try:
-            self._dispatch(message)
-        except PendantMessageError as exc:
-            await self.refuse(client, str(exc))
+            handle.submit(_intent_of(message))
+        except InputRefused as exc:
+            # A refusal the machine side raised (not a rule of the arbiter) says so first.
+            await self.refuse(page, str(exc) if exc.__cause__ is None else f"jog refused: {exc}")
+
+    async def _set_ratios(
+        self, page: WebInput, handle: InputHandle, message: RatiosMessage
+    ) -> None:
+        try:
+            self.backend.set_speed_ratios(message.ratios)
         except Exception as exc:  # the backend may fail in any way; the machine must stop
             log.exception("pendant backend failed on %r", message)
-            self._release()
-            self._call_stop("backend error")
-            await self.refuse(client, f"jog refused: {exc}")
+            with contextlib.suppress(InputRefused):
+                handle.submit(StopIntent())
+            await self.refuse(page, f"jog refused: {exc}")
 
-    def _dispatch(self, message: JogMessage | StopMessage | StepMessage | RatiosMessage) -> None:
-        if isinstance(message, JogMessage):
-            if message.neutral:
-                if self.deadman.armed:
-                    self._release()
-                    self.backend.stop()
-                return
-            if not self.deadman.armed:
-                self._require_can_jog()
-            self.backend.jog_continuous(message.axes, message.speed)
-            self.deadman.feed(asyncio.get_running_loop().time())
-            self._schedule_deadman()
-        elif isinstance(message, StopMessage):
-            self._release()
-            self.backend.stop()
-        elif isinstance(message, StepMessage):
-            self._require_can_jog()
-            self.backend.jog_step(message.axis, message.dist_mm)
-        else:
-            self.backend.set_speed_ratios(message.ratios)
-
-    def _require_can_jog(self) -> None:
-        """Refuse a new jog in words when the machine says jogging is disabled."""
-        view = self.backend.view()
-        if view.get("can_jog") is False:
-            reason = view.get("reason") or f"machine state is {view.get('state')}"
-            raise PendantMessageError(f"jogging is disabled: {reason}")
-
-    async def _take_control(self, client: _Client) -> None:
-        """Grant control when nobody holds it or the holder has no continuous jog active."""
-        if client is self.controller:
+    async def _take_control(self, page: WebInput, handle: InputHandle) -> None:
+        """Ask the arbiter for control; it refuses in words while another holds a jog."""
+        if handle.in_control:
             await self._send_roles()
             return
-        if self.controller is not None and self.deadman.armed:
-            await self.refuse(
-                client, "another pendant is holding a jog; control can pass once it releases"
-            )
-            return
-        log.info("pendant client %s takes control", client.label)
-        self.controller = client
-        await self._send_roles()
-
-    # -- dead-man ----------------------------------------------------------------------------
-
-    def _release(self) -> None:
-        self.deadman.disarm()
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-
-    def _schedule_deadman(self) -> None:
-        deadline = self.deadman.deadline_s()
-        if self._timer is None and deadline is not None:
-            # One timer per window, not per heartbeat: it re-arms itself if fed meanwhile.
-            self._timer = asyncio.get_running_loop().call_at(deadline, self._on_deadman_timer)
-
-    def _on_deadman_timer(self) -> None:
-        self._timer = None
-        now_s = asyncio.get_running_loop().time()
-        if not self.deadman.expired(now_s):
-            self._schedule_deadman()
-            return
-        silent_s = now_s - (self.deadman.last_heard_s or now_s)
-        self.deadman.disarm()
-        self.deadman_trips += 1
-        log.warning("pendant dead-man: no heartbeat for %.0f ms, stopping", silent_s * 1000)
-        self._call_stop("dead-man")
-        controller = self.controller
-        if controller is not None:
-            text = dumps(
-                error_message(
-                    f"jog stopped: no heartbeat from this pendant for {silent_s * 1000:.0f} ms "
-                    "(weak Wi-Fi or a busy device?)"
-                )
-            )
-            task = asyncio.get_running_loop().create_task(self._send(controller, text))
-            _background.add(task)
-            task.add_done_callback(_background.discard)
-
-    def _call_stop(self, why: str) -> None:
         try:
-            self.backend.stop()
-        except Exception:  # a failing stop must not take the server down; it is logged loudly
-            log.exception("pendant backend failed to stop (%s)", why)
+            handle.take_control()
+        except InputRefused as exc:
+            await self.refuse(page, str(exc))
+            return
+        await self._flush_roles()
 
     # -- view stream -------------------------------------------------------------------------
 
@@ -324,29 +320,48 @@ class PendantHub:
             await self._broadcast(text)
 
     async def _broadcast(self, text: str) -> None:
-        await asyncio.gather(*(self._send(c, text) for c in list(self.clients)))
+        await asyncio.gather(*(self.send(c, text) for c in list(self.clients)))
 
-    async def _send(self, client: _Client, text: str) -> None:
-        if client.ws.closed:
+    async def send(self, page: WebInput, text: str) -> None:
+        """Send one frame; a page that cannot take it in SEND_TIMEOUT_S is closed."""
+        if page.ws.closed:
             return
         try:
-            await asyncio.wait_for(client.ws.send_str(text), SEND_TIMEOUT_S)
+            await asyncio.wait_for(page.ws.send_str(text), SEND_TIMEOUT_S)
         except TimeoutError:
-            log.warning("pendant client %s is not reading; closing it", client.label)
-            await client.ws.close()
+            log.warning("pendant client %s is not reading; closing it", page.name)
+            await page.ws.close()
         except (ConnectionError, RuntimeError):
-            # The peer vanished between the closed check and the write; remove() follows.
+            # The peer vanished between the closed check and the write; disconnect() follows.
             pass
 
     async def shutdown(self) -> None:
-        """Close every page and leave the machine at rest."""
-        self._release()
-        self._call_stop("server shutting down")
-        for client in list(self.clients):
-            await client.ws.close(code=1001, message=b"pendant server shutting down")
+        """Detach every page (which stops the machine if a page drove it), then close them."""
+        for page in list(self.clients):
+            if page.handle is not None:
+                page.handle.detach()
+        for page in list(self.clients):
+            await page.ws.close(code=1001, message=b"pendant server shutting down")
+
+
+def _intent_of(message: JogMessage | StopMessage | StepMessage) -> Intent:
+    """The jog intent a page's message asks for."""
+    if isinstance(message, JogMessage):
+        return ContinuousIntent(dict(message.axes), message.speed)
+    if isinstance(message, StepMessage):
+        return StepIntent(message.axis, message.dist_mm, STEP_SPEED)
+    return StopIntent()
 
 
 _background: set[asyncio.Task[None]] = set()
+
+
+def _spawn(coro: Coroutine[object, object, None]) -> None:
+    """Run coro in the background, keeping a reference so it is not collected mid-send."""
+    task = asyncio.get_running_loop().create_task(coro)
+    _background.add(task)
+    task.add_done_callback(_background.discard)
+
 
 HUB_KEY: Final = web.AppKey("pendant_hub", PendantHub)
 POLICY_KEY: Final = web.AppKey("pendant_policy", _Policy)
@@ -418,15 +433,13 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
     # refusal from the parser; only absurd frames close the connection.
     ws = web.WebSocketResponse(max_msg_size=16 * MAX_MESSAGE_BYTES, heartbeat=5.0)
     await ws.prepare(request)
-    client = await hub.add(ws, request.remote or "?")
+    page = hub.connect(ws, request.remote or "?")
     try:
-        async for msg in ws:
-            if msg.type == WSMsgType.TEXT:
-                await hub.on_text(client, msg.data)
-            elif msg.type == WSMsgType.BINARY:
-                await hub.refuse(client, "binary frames are not understood; send JSON text")
+        # Attaches the page, serves it until its socket closes, detaches it (stopping the
+        # machine if the page was driving it).
+        await hub.arbiter.run_input(page)
     finally:
-        await hub.remove(client)
+        await hub.disconnect(page)
     return ws
 
 
@@ -436,14 +449,16 @@ def create_app(
     token: str | None,
     allowed_origins: set[str] | None = None,
     deadman_s: float = 0.15,
+    arbiter: Arbiter | None = None,
 ) -> web.Application:
     """The pendant as an aiohttp application: page at /, assets at /static/, WebSocket at /ws.
 
     token None serves loopback names and IP literals only; a token is then required by every
     route (?token= once, then an HttpOnly cookie). allowed_origins adds origins (e.g. a reverse
-    proxy's) that may open /ws besides the page's own.
+    proxy's) that may open /ws besides the page's own. Each page is an input of the arbiter
+    (a new one over backend unless the session's own is given) with a lease of deadman_s.
     """
-    hub = PendantHub(backend=backend, deadman=DeadMan(deadman_s))
+    hub = PendantHub(backend=backend, arbiter=arbiter or Arbiter(backend), deadman_s=deadman_s)
     app = web.Application(middlewares=[_guard])
     app[HUB_KEY] = hub
     app[POLICY_KEY] = _Policy(token=token, allowed_origins=frozenset(allowed_origins or ()))
@@ -511,14 +526,16 @@ async def run_pendant(
     backend: PendantBackend,
     *,
     host: str = "127.0.0.1",
-    port: int = 8765,
+    port: int = DEFAULT_HTTP_PORT,
     lan: bool = False,
     on_ready: Callable[[str], object] | None = None,
+    arbiter: Arbiter | None = None,
 ) -> None:
     """Serve the pendant until cancelled; prints its URL (and with lan, the token URL and QR).
 
     Without lan only a loopback host is accepted. With lan it binds 0.0.0.0 and requires a fresh
-    pairing token. on_ready receives the URL to open (with the token in LAN mode).
+    pairing token. on_ready receives the URL to open (with the token in LAN mode). arbiter is
+    the session's, shared with its other inputs (a new one over backend when None).
     """
     token: str | None = None
     bind = host
@@ -531,7 +548,7 @@ async def run_pendant(
             f"refusing to serve the pendant on {host}: anyone on the network could jog the "
             "machine; use --lan, which requires a pairing token, or bind 127.0.0.1"
         )
-    runner = web.AppRunner(create_app(backend, token=token), access_log=None)
+    runner = web.AppRunner(create_app(backend, token=token, arbiter=arbiter), access_log=None)
     await runner.setup()
     try:
         site = web.TCPSite(runner, bind, port)
@@ -567,4 +584,4 @@ def _bound_port(runner: web.AppRunner, requested: int) -> int:
     return requested
 
 
-__all__ = ["PendantHub", "create_app", "format_banner", "run_pendant"]
+__all__ = ["STEP_SPEED", "PendantHub", "WebInput", "create_app", "format_banner", "run_pendant"]

@@ -1,7 +1,7 @@
-"""The pendant's backend for real: the web page's intents go to a JogSession's engine.
+"""The pendant's backend for real: intents the arbiter lets through go to the host's engine.
 
 Every method returns at once (the engine only records the intent; the session's ticker acts on
-it). Invalid requests raise JogBuildError, which the server reports to the page in words.
+it). Invalid intents raise JogBuildError, which the arbiter reports to the page in words.
 """
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import math
 from collections.abc import Mapping
 
 from smoothjog.core.codes import describe_alarm
-from smoothjog.core.jogger import ContinuousIntent, StepIntent, StopIntent
-from smoothjog.session import JogSession
+from smoothjog.core.jogger import Intent
+from smoothjog.host import Host
 
-#: Step jogs run at this fraction of the top jog speed (fine positioning wants control, not haste).
-STEP_SPEED = 0.5
+#: Why nothing may jog once the link is gone (the view's reason says the same).
+LINK_LOST = "the connection to the controller is lost"
 
 
 def _finite(values: object) -> list[float | None] | None:
@@ -28,30 +28,29 @@ def _finite(values: object) -> list[float | None] | None:
 
 
 class SessionBackend:
-    """PendantBackend over a started JogSession."""
+    """PendantBackend over a started Host."""
 
-    def __init__(self, session: JogSession, *, speed_ratios: Mapping[str, float] | None = None):
+    def __init__(self, session: Host, *, speed_ratios: Mapping[str, float] | None = None):
         """Wrap a session whose start() has completed."""
         self.session = session
         engine = session.engine
         if engine is None:
-            raise RuntimeError("SessionBackend needs a started JogSession")
+            raise RuntimeError("SessionBackend needs a started Host")
         self._ratios = dict.fromkeys(engine.limits.axes, 1.0)
         if speed_ratios:
             self.set_speed_ratios(speed_ratios)
 
     # ------------------------------------------------------------------ intents
-    def jog_continuous(self, axes: Mapping[str, float], speed: float) -> None:
-        """Hold a stick deflection (the page repeats it as the heartbeat)."""
-        self.session.set_intent(ContinuousIntent(dict(axes), speed))
+    def set_intent(self, intent: Intent) -> None:
+        """Hand the engine the newest intent (the arbiter already let it through)."""
+        self.session.set_intent(intent)
 
-    def jog_step(self, axis: str, dist_mm: float) -> None:
-        """Queue an exact step."""
-        self.session.set_intent(StepIntent(axis, dist_mm, STEP_SPEED))
-
-    def stop(self) -> None:
-        """Neutral: the engine's full cancel handshake."""
-        self.session.set_intent(StopIntent())
+    def can_jog(self) -> tuple[bool, str | None]:
+        """The engine's verdict, and no jog at all once the link to the controller is lost."""
+        if self.session.link_error is not None:
+            return False, LINK_LOST
+        v = self.session.view()
+        return v.can_jog, v.reason
 
     def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
         """Per-axis top speed ratios in (0, 1]."""
@@ -77,7 +76,7 @@ class SessionBackend:
             fault = {"text": describe_alarm(model.last_alarm), "hint": ""}
         reason = v.reason
         if session.link_error is not None:
-            reason = "the connection to the controller is lost"
+            reason = LINK_LOST
         return {
             "t_s": v.t_s,
             "firmware": f"{model.firmware} {model.version or ''}".strip(),
