@@ -1,4 +1,4 @@
-"""`python -m bench [jog|fuzz|micro|sim] [options]`: smoothjog's benchmark commands."""
+"""`python -m bench [jog|fuzz|micro|sim|cpu] [options]`: smoothjog's benchmark commands."""
 
 from __future__ import annotations
 
@@ -26,6 +26,10 @@ def main() -> int:
         from bench import bench_sim_speed
 
         return bench_sim_speed.main()
+    if name == "cpu":
+        from bench import cpu
+
+        return cpu.main(rest)
     if name == "all":
         from bench import bench_sim_speed, jog, micro
 
@@ -33,7 +37,7 @@ def main() -> int:
         code |= micro.main([])
         code |= bench_sim_speed.main()
         return code
-    print(f"unknown benchmark {name!r}: use jog, fuzz, micro or sim", file=sys.stderr)
+    print(f"unknown benchmark {name!r}: use jog, fuzz, micro, sim or cpu", file=sys.stderr)
     return 2
 
 
