@@ -14,13 +14,13 @@ import time
 from dataclasses import dataclass, field
 
 from smoothjog.core.errors import SmoothjogError
-from smoothjog.core.jogger import ContinuousIntent, Intent, StepIntent, StopIntent
+from smoothjog.core.jogger import ContinuousIntent, EngineEvent, Intent, StepIntent, StopIntent
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.responses import GcodeModes
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
-from smoothjog.vsession import VirtualSession
+from smoothjog.virtual import VirtualHost
 
 #: A vise near the middle of the hobby router's table, in machine coordinates.
 VISE = KeepOut("vise", (-420.0, -420.0, -100.0), (-380.0, -380.0, 0.0))
@@ -73,7 +73,7 @@ def _random_intent(rng: random.Random) -> Intent:
     return ContinuousIntent(axes, rng.choice([0.1, 0.3, 0.6, 1.0]))
 
 
-def _gcode_words(vs: VirtualSession) -> tuple[str, ...]:
+def _gcode_words(vs: VirtualHost) -> tuple[str, ...]:
     for resp in vs.query_line("$G"):
         if isinstance(resp, GcodeModes):
             return resp.words
@@ -84,7 +84,8 @@ def run_fuzz(firmware: str, sequences: int, seed: int = 1) -> FuzzReport:
     """Run `sequences` random sequences on one firmware profile and count every violation."""
     rng = random.Random(seed)
     fw = GrblFirmware(get_firmware_profile(firmware), "hobby-router")
-    vs = VirtualSession(SimRig(fw, LinkModel()), keepouts=(VISE,))
+    events: list[EngineEvent] = []
+    vs = VirtualHost(SimRig(fw, LinkModel()), keepouts=(VISE,), on_event=events.append)
     model = vs.handshake()
     engine = vs.engine
     assert engine is not None
@@ -127,7 +128,8 @@ def run_fuzz(firmware: str, sequences: int, seed: int = 1) -> FuzzReport:
     if engine.stats.stops:
         report.worst_tracking_steps = max(s.tracked_error_steps for s in engine.stats.stops)
     report.gcode_state_changed = _gcode_words(vs) != gcode_before
-    faults = [e.text for e in engine.events if e.kind == "fault"]
+    vs.close()
+    faults = [e.text for e in events if e.kind == "fault"]
     report.false_outside_alarms = sum(
         "stopped outside smoothjog" in f or "left the path" in f for f in faults
     )

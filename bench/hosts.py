@@ -1,7 +1,8 @@
 """The four reference jog methods, each built from its published description, plus smoothjog.
 
-Every host keeps the contract of `smoothjog.vsession.JogHost` (set_intent, on_response, poll,
-next_deadline_s, busy) so the same scenarios drive them all on the same simulator. The reference
+Every method keeps the engine contract of `smoothjog.host.JogEngine` (set_intent, on_reply,
+on_response, poll, next_deadline_s, busy), so the one host drives them all, on the same simulator
+and through the same line ledger, exactly as it drives smoothjog's own engine. The reference
 methods are written as their authors describe them, flaws included; none of them is smoothjog.
 
 - PendantPost150: the pendant post's smooth multi-axis jogging: a `$J=G91` increment worth 150 ms
@@ -18,7 +19,6 @@ methods are written as their authors describe them, flaws included; none of them
 from __future__ import annotations
 
 import math
-from collections import deque
 
 from smoothjog.core.jogger import (
     ContinuousIntent,
@@ -31,33 +31,35 @@ from smoothjog.core.jogger import (
     SendRealtime,
 )
 from smoothjog.core.jogline import build_jog_line
+from smoothjog.core.ledger import ENGINE, Entry, Ledger
 from smoothjog.core.machine import MachineModel
+from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import ErrorReply, Ok, Response
 from smoothjog.core.units import mm_min_to_mm_s
+from smoothjog.host import EngineFactory
 
-JOG_CANCEL = b"\x85"
 #: Status polling of the reference senders (Grbl's docs: no more than 5 Hz).
 STATUS_INTERVAL_S = 0.2
 
 
 class _Host:
-    """Shared plumbing: the machine model, character counting, and the held stick."""
+    """Shared plumbing: the machine model, the ledger's room check, and the held stick."""
 
     #: The host's own send cycle, used to place releases at several phases of it.
     cycle_s = 0.010
     name = "host"
 
-    def __init__(self, model: MachineModel) -> None:
+    def __init__(self, model: MachineModel, ledger: Ledger) -> None:
         self.model = model
+        self.ledger = ledger
         self.limits = EngineLimits.from_model(model)
         self.max_feed_mm_min = max(self.limits.max_rate_mm_min)
         self.stick: ContinuousIntent | None = None
-        self._pending: deque[str] = deque()
-        self._pending_bytes = 0
         self.outbox: list[Output] = []
         self._last_status_s = -1.0
+        self._now_s = 0.0
 
-    # JogHost -----------------------------------------------------------------------------
+    # JogEngine ---------------------------------------------------------------------------
     def set_intent(self, intent: Intent, now_s: float) -> None:
         """Take the stick; reference methods know only continuous jogging."""
         if isinstance(intent, ContinuousIntent) and not intent.is_neutral():
@@ -65,20 +67,20 @@ class _Host:
         else:
             self.release(now_s)
 
+    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
+        """One of this method's lines was answered."""
+        self.on_line_reply(entry.text, resp, now_s)
+
     def on_response(self, resp: Response, now_s: float) -> None:
-        """Count replies (character counting) and let the method react to its ok."""
-        self.model.apply(resp)
-        if isinstance(resp, Ok | ErrorReply) and self._pending:
-            line = self._pending.popleft()
-            self._pending_bytes -= len(line) + 1
-            self.on_reply(line, resp, now_s)
+        """Other lines: the host has folded them into the model already."""
 
     def poll(self, now_s: float) -> list[Output]:
         """Give the method a chance to act, then hand over what it queued."""
+        self._now_s = now_s
         if now_s - self._last_status_s >= STATUS_INTERVAL_S:
             # Every sender polls the position; 5 Hz is what Grbl's interface doc recommends.
             self._last_status_s = now_s
-            self.realtime(b"?")
+            self.realtime(STATUS_QUERY)
         self.tick(now_s)
         out, self.outbox = self.outbox, []
         return out
@@ -89,7 +91,11 @@ class _Host:
 
     def busy(self) -> bool:
         """True while the stick is held or lines await an answer."""
-        return self.stick is not None or bool(self._pending)
+        return self.stick is not None or self.ledger.waiting(ENGINE) > 0
+
+    def reset_machine(self, limits: EngineLimits) -> None:
+        """A reset: the reference methods simply carry on with the new limits."""
+        self.limits = limits
 
     # for the methods ---------------------------------------------------------------------
     def press(self, intent: ContinuousIntent, now_s: float) -> None:
@@ -103,16 +109,14 @@ class _Host:
     def tick(self, now_s: float) -> None:
         """Periodic work."""
 
-    def on_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
+    def on_line_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
         """A line was answered."""
 
     def send(self, line: str) -> bool:
-        """Queue a line if the 128-byte RX buffer has room for it (character counting)."""
-        cost = len(line) + 1
-        if self._pending_bytes + cost > self.limits.rx_buffer_bytes:
+        """Queue a line if the RX buffer has room for it (character counting, by the ledger)."""
+        if not self.ledger.fits(line):
             return False
-        self._pending.append(line)
-        self._pending_bytes += cost
+        self.ledger.record_line(ENGINE, line, self._now_s)
         self.outbox.append(SendLine(line))
         return True
 
@@ -152,8 +156,8 @@ class PendantPost150(_Host):
     #: How late the sender's timer fires, every time (see the class note and bench/README).
     timer_late_s = 0.0006
 
-    def __init__(self, model: MachineModel) -> None:
-        super().__init__(model)
+    def __init__(self, model: MachineModel, ledger: Ledger) -> None:
+        super().__init__(model, ledger)
         self.fire_s: float | None = None
         self.sent_count = 0
 
@@ -198,8 +202,8 @@ class PendantPost150(_Host):
 class WikiJog(_Host):
     """Grbl's jogging doc: one jog in flight, next on ok, 0x85 on release."""
 
-    def __init__(self, model: MachineModel, *, corrected: bool) -> None:
-        super().__init__(model)
+    def __init__(self, model: MachineModel, ledger: Ledger, *, corrected: bool) -> None:
+        super().__init__(model, ledger)
         self.corrected = corrected
         self.name = "wiki, dt corrected" if corrected else "wiki, dt as printed"
         self.in_flight = False
@@ -233,7 +237,7 @@ class WikiJog(_Host):
         if self.send(line):
             self.in_flight = True
 
-    def on_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
+    def on_line_reply(self, line: str, resp: Ok | ErrorReply, now_s: float) -> None:
         self.in_flight = False
 
 
@@ -243,8 +247,8 @@ class LongJog(_Host):
     name = "one long jog + 0x85"
     cycle_s = 0.010
 
-    def __init__(self, model: MachineModel) -> None:
-        super().__init__(model)
+    def __init__(self, model: MachineModel, ledger: Ledger) -> None:
+        super().__init__(model, ledger)
         self.active = False
         self.want: ContinuousIntent | None = None
 
@@ -270,7 +274,7 @@ class LongJog(_Host):
         feed = math.sqrt(sum(s * s for s in speeds.values()))
         pos = self.model.mpos_mm
         # Distance to the edge of travel along the direction: the soft-limit box, or without
-        # soft limits the homed machine space -$13x..0 (facts §2), as senders compute it.
+        # soft limits the homed machine space -$13x..0 (firmware-facts §2), as senders compute it.
         travel = self.model.settings.for_axes(len(self.limits.axes)).max_travel_mm
         env = self.limits.envelope
         lo = env.min_mm if env is not None else tuple(-t for t in travel)
@@ -287,14 +291,14 @@ class LongJog(_Host):
             self.active = True
 
 
-def smoothjog_host(model: MachineModel, tuning: JogTuning | None = None) -> Jogger:
-    """smoothjog's own engine as a bench host."""
-    return Jogger(model, EngineLimits.from_model(model), tuning)
+def smoothjog_host(model: MachineModel, ledger: Ledger, tuning: JogTuning | None = None) -> Jogger:
+    """smoothjog's own engine, as the host builds it."""
+    return Jogger(model, EngineLimits.from_model(model), tuning, ledger)
 
 
-REFERENCE_FACTORIES = {
+REFERENCE_FACTORIES: dict[str, EngineFactory] = {
     "fixed 150 ms, no cancel": PendantPost150,
-    "wiki, dt as printed": lambda m: WikiJog(m, corrected=False),
-    "wiki, dt corrected": lambda m: WikiJog(m, corrected=True),
+    "wiki, dt as printed": lambda m, ledger: WikiJog(m, ledger, corrected=False),
+    "wiki, dt corrected": lambda m, ledger: WikiJog(m, ledger, corrected=True),
     "one long jog + 0x85": LongJog,
 }

@@ -9,16 +9,14 @@ import argparse
 import math
 import statistics
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, smoothjog_host
 from smoothjog.core.jogger import Jogger
-from smoothjog.core.machine import MachineModel
-from smoothjog.vsession import JogHost
+from smoothjog.host import EngineFactory
 
-Factory = Callable[[MachineModel], JogHost]
+Factory = EngineFactory
 
 #: The real Grbl 1.1h figures of the engine issue (hobby router), medians of 5 runs.
 REAL_FIRMWARE: dict[str, dict[str, tuple[float, ...]]] = {
@@ -83,11 +81,12 @@ def _cycle_s(factory: Factory, machine: str) -> float:
     vs, _ = sc._session(factory, machine, "grbl")
     vs.set_intent(sc._stick(1.0))
     vs.run_until(vs.now_s + 0.3)
-    host = vs.host
-    if isinstance(host, Jogger):
+    driver = vs.driver
+    vs.close()
+    if isinstance(driver, Jogger):
         # One increment at full speed lasts the engine's block time (just over one segment).
-        return host.tuning.dt_floor_s
-    return float(getattr(host, "cycle_s", 0.010))
+        return driver.tuning.dt_floor_s
+    return float(getattr(driver, "cycle_s", 0.010))
 
 
 def run_all(

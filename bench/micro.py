@@ -6,31 +6,50 @@ import math
 import statistics
 import time
 
-from smoothjog.core.jogger import ContinuousIntent
+from smoothjog.core.jogger import ContinuousIntent, EngineLimits, Intent, Jogger, Output
+from smoothjog.core.ledger import Ledger
+from smoothjog.core.machine import MachineModel
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.rig import LinkModel, SimRig
-from smoothjog.vsession import VirtualSession
+from smoothjog.virtual import VirtualHost
+
+
+class _TimedJogger(Jogger):
+    """The engine, timing each set_intent together with the poll that acts on it."""
+
+    def __init__(self, model: MachineModel, ledger: Ledger) -> None:
+        super().__init__(model, EngineLimits.from_model(model), None, ledger)
+        self.timings_us: list[float] = []
+        self._intent_us: float | None = None
+
+    def set_intent(self, intent: Intent, now_s: float) -> None:
+        start = time.perf_counter()
+        super().set_intent(intent, now_s)
+        self._intent_us = (time.perf_counter() - start) * 1e6
+
+    def poll(self, now_s: float) -> list[Output]:
+        start = time.perf_counter()
+        out = super().poll(now_s)
+        if self._intent_us is not None:
+            self.timings_us.append(self._intent_us + (time.perf_counter() - start) * 1e6)
+            self._intent_us = None
+        return out
 
 
 def measure_us(samples: int = 2000) -> list[float]:
     """Microseconds per intent for `samples` stick updates of a 1 Hz sweep, in virtual time."""
-    vs = VirtualSession(SimRig(GrblFirmware(machine="hobby-router"), LinkModel()))
-    vs.handshake()
-    engine = vs.engine
-    assert engine is not None
-    timings: list[float] = []
-    t0 = vs.now_s
-    for k in range(samples):
-        vs.run_until(t0 + k * 0.02)
-        x = -math.sin(2 * math.pi * k * 0.02)
-        intent = ContinuousIntent({"X": round(x, 4) or 0.001, "Y": 0.3}, 0.5)
-        start = time.perf_counter()
-        engine.set_intent(intent, vs.now_s)
-        outputs = engine.poll(vs.now_s)
-        timings.append((time.perf_counter() - start) * 1e6)
-        for output in outputs:
-            vs._send(output)
-    return timings
+    rig = SimRig(GrblFirmware(machine="hobby-router"), LinkModel())
+    with VirtualHost(rig, engine_factory=_TimedJogger) as vs:
+        vs.handshake()
+        engine = vs.driver
+        assert isinstance(engine, _TimedJogger)
+        t0 = vs.now_s
+        for k in range(samples):
+            vs.run_until(t0 + k * 0.02)
+            x = -math.sin(2 * math.pi * k * 0.02)
+            vs.set_intent(ContinuousIntent({"X": round(x, 4) or 0.001, "Y": 0.3}, 0.5))
+        vs.run_until(vs.now_s + 0.001)
+        return engine.timings_us
 
 
 def main(argv: list[str] | None = None) -> int:

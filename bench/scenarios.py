@@ -8,19 +8,18 @@ the machine really did from the simulator's segment trace.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from bench import measure
 from smoothjog.core.jogger import ContinuousIntent
-from smoothjog.core.machine import MachineModel
 from smoothjog.core.units import mm_min_to_mm_s
+from smoothjog.host import EngineFactory
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
-from smoothjog.vsession import JogHost, VirtualSession
+from smoothjog.virtual import VirtualHost
 
-Factory = Callable[[MachineModel], JogHost]
+Factory = EngineFactory
 
 #: The stick's X direction: toward the far end of travel from the homed + corner.
 DIRECTION = -1.0
@@ -66,13 +65,13 @@ LINK = LinkModel()
 CLOCK_RATIO = 1.0
 
 
-def _session(factory: Factory, machine: str, firmware: str) -> tuple[VirtualSession, float]:
+def _session(factory: Factory, machine: str, firmware: str) -> tuple[VirtualHost, float]:
     fw = GrblFirmware(get_firmware_profile(firmware), machine)
     rig = SimRig(fw, LINK, clock_ratio=CLOCK_RATIO)
     # Soft limits off, as in the real-firmware runs of the reference methods: the printed wiki
     # method queues 16 x 41 mm, which runs past the 800 mm travel and would meet error:15.
     rig.host_send(b"$20=0\n", 0.0)
-    vs = VirtualSession(rig, host_factory=factory)
+    vs = VirtualHost(rig, engine_factory=factory)
     vs.handshake()
     t0 = vs.now_s + 0.05
     vs.run_until(t0)
@@ -84,7 +83,7 @@ def _stick(speed: float, x: float = DIRECTION) -> ContinuousIntent:
 
 
 def _series(
-    vs: VirtualSession, t0: float, t1: float, origin: float | None = None
+    vs: VirtualHost, t0: float, t1: float, origin: float | None = None
 ) -> list[tuple[float, float]]:
     """X velocity over [t0, t1], times relative to origin (the scenario's event; default t0)."""
     zero = t0 if origin is None else origin
@@ -98,7 +97,7 @@ def _hold_s(ph: Physics) -> float:
 
 def _held(
     factory: Factory, machine: str, firmware: str, phase_s: float, speed: float = 1.0
-) -> tuple[Physics, VirtualSession, float]:
+) -> tuple[Physics, VirtualHost, float]:
     """Press the stick toward -X at speed and hold it up to the scenario's event (hold + phase).
 
     Returns the profile's physics, the session and the event time.
@@ -119,7 +118,7 @@ def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed
     vs.run_until(vs.now_s + 0.5)
     trace = vs.rig.trace
     end = measure.last_motion_end(trace)
-    return Run(
+    run = Run(
         {
             "dist_mm": measure.distance_after(trace, t_rel),
             "time_s": max(end - t_rel, 0.0),
@@ -127,6 +126,8 @@ def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed
         },
         _series(vs, t_rel - 0.5, t_rel + 1.5, t_rel),
     )
+    vs.close()
+    return run
 
 
 def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
@@ -141,7 +142,9 @@ def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
     vs.run_until_idle(30.0)
     # Measured once the trace holds every segment up to t_end (it records finished segments).
     share, dips = measure.hold_quality(vs.rig.trace, window0, t_end, ph.speed_mm_s)
-    return Run({"within_2pct": share, "dips": float(dips)}, _series(vs, t0, t_end + 1.0))
+    run = Run({"within_2pct": share, "dips": float(dips)}, _series(vs, t0, t_end + 1.0))
+    vs.close()
+    return run
 
 
 def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
@@ -156,10 +159,12 @@ def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> R
     took = measure.time_to_velocity(vs.rig.trace, t_rev, t_end, 0, -DIRECTION * ph.speed_mm_s)
     vs.set_intent(_stick(1.0, 0.0))
     vs.run_until_idle(30.0)
-    return Run(
+    run = Run(
         {"time_s": took if took is not None else math.inf},
         _series(vs, t_rev - 0.5, t_rev + 2 * ph.stop_s + 1.0, t_rev),
     )
+    vs.close()
+    return run
 
 
 def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
@@ -168,13 +173,15 @@ def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -
     vs.kill()
     vs.run_until(t_kill + 20.0)
     trace = vs.rig.trace
-    return Run(
+    run = Run(
         {
             "dist_mm": measure.distance_after(trace, t_kill),
             "time_s": measure.last_motion_end(trace) - t_kill,
         },
         _series(vs, t_kill - 0.5, t_kill + 2.0, t_kill),
     )
+    vs.close()
+    return run
 
 
 def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
@@ -186,10 +193,12 @@ def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) 
     took = measure.settle_time(vs.rig.trace, t_change, t_end, 0.3 * ph.speed_mm_s)
     vs.set_intent(_stick(0.3, 0.0))
     vs.run_until_idle(30.0)
-    return Run(
+    run = Run(
         {"time_s": took if took is not None else math.inf},
         _series(vs, t_change - 0.5, t_change + 2 * ph.stop_s + 1.0, t_change),
     )
+    vs.close()
+    return run
 
 
 def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
@@ -215,8 +224,10 @@ def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) ->
         commanded.append((tk, x * speed * ph.speed_mm_s))
     actual = [(tt, v[0]) for tt, v in measure.sample_velocity(vs.rig.trace, a0, a1)]
     lag, match = measure.lag_and_match(commanded, actual)
-    return Run(
+    run = Run(
         {"lag_s": lag, "match": match},
         _series(vs, t0, t0 + duration_s),
         [(tt - t0, c) for tt, c in commanded[::2]],
     )
+    vs.close()
+    return run

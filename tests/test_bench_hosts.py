@@ -6,21 +6,20 @@ import pytest
 from bench import hosts, jog
 from bench import scenarios as sc
 
-from smoothjog.core.jogger import SendLine
-from smoothjog.vsession import VirtualSession
+from smoothjog.virtual import VirtualHost
 
 
-def _jog_lines(vs: VirtualSession, t0: float, hold_s: float) -> list[tuple[float, str]]:
+def _jog_lines(vs: VirtualHost, t0: float, hold_s: float) -> list[tuple[float, str]]:
     """The jog lines the host wrote while the stick was held, with their times from t0."""
     sent: list[tuple[float, str]] = []
-    forward = vs._send
+    forward = vs.rig.host_send
 
-    def spy(output: object) -> None:
-        if isinstance(output, SendLine) and output.text.startswith("$J="):
-            sent.append((vs.now_s - t0, output.text))
-        forward(output)  # type: ignore[arg-type]
+    def spy(data: bytes, now_s: float) -> float:
+        if data.startswith(b"$J="):
+            sent.append((now_s - t0, data.decode().strip()))
+        return forward(data, now_s)
 
-    vs._send = spy  # type: ignore[method-assign]
+    vs.rig.host_send = spy  # type: ignore[method-assign]
     vs.set_intent(sc._stick(1.0))
     vs.run_until(t0 + hold_s)
     return sent

@@ -81,6 +81,7 @@ _SUMMARY = re.compile(
     r"replay finished on (?P<where>.+)\n"
     r"  duration        (?P<duration>[-\d.]+) s\n"
     r"(?:  distance        (?P<distance>[-\d.]+) mm \(simulator ground truth\)\n)?"
+    r"  lines sent      (?P<lines>\d+)\n"
     r"  stops           (?P<stops>\d+)\n"
     r"  tracked - real  (?P<um>[-\d.]+) µm, (?P<steps>[-\d.]+) steps \(worst axis, worst stop\)\n"
     r"  final state     (?P<state>\S+) at MPos (?P<mpos>[-\d., ]+)\n"
@@ -278,7 +279,8 @@ def test_realtime_on_the_simulator(tmp_path: Path) -> None:
     script = write_replay(tmp_path / "short.jsonl", *SHORT_SCRIPT)
     summary = assert_clean_success(run_jog("--replay", str(script), "--realtime", timeout_s=20))
     assert summary.where == "simulated grbl (hobby-router) at 115200 baud"
-    assert summary.distance_mm is None  # no ground truth is read in real time
+    assert summary.distance_mm is not None  # the built-in simulator's ground truth
+    assert summary.distance_mm > 0.0
     assert summary.stops >= 1
     x_mm, y_mm, z_mm = summary.final_mpos
     assert -60.0 < x_mm < -2.0  # 0.4 s at up to 41.7 mm/s from -1

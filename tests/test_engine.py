@@ -22,7 +22,7 @@ from smoothjog.core.responses import GcodeModes
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
-from smoothjog.vsession import VirtualSession
+from smoothjog.virtual import VirtualHost
 
 V_MM_S = 5000 / 60  # hobby router X/Y
 A_MM_S2 = 500.0
@@ -31,14 +31,14 @@ STEP_MM = 1 / 80  # hobby router X/Y steps/mm
 
 def session(
     firmware: str = "grbl", machine: str = "hobby-router", keepouts: tuple[KeepOut, ...] = ()
-) -> VirtualSession:
+) -> VirtualHost:
     fw = GrblFirmware(get_firmware_profile(firmware), machine)
-    vs = VirtualSession(SimRig(fw, LinkModel()), keepouts=keepouts)
+    vs = VirtualHost(SimRig(fw, LinkModel()), keepouts=keepouts)
     vs.handshake()
     return vs
 
 
-def sent_lines(vs: VirtualSession) -> list[str]:
+def sent_lines(vs: VirtualHost) -> list[str]:
     """Every line the engine sends from now on (wraps the rig)."""
     lines: list[str] = []
     original = vs.rig.host_send
@@ -52,7 +52,7 @@ def sent_lines(vs: VirtualSession) -> list[str]:
     return lines
 
 
-def gcode_words(vs: VirtualSession) -> tuple[str, ...]:
+def gcode_words(vs: VirtualHost) -> tuple[str, ...]:
     return next(r.words for r in vs.query_line("$G") if isinstance(r, GcodeModes))
 
 
@@ -211,7 +211,7 @@ def test_random_press_release_reverse_is_safe_on_every_firmware(firmware: str) -
 
 def test_unhomed_machine_with_soft_limits_is_explained_not_jogged(tmp_path: object) -> None:
     fw = GrblFirmware(get_firmware_profile("grbl"), "hobby-router")
-    vs = VirtualSession(SimRig(fw, LinkModel()))
+    vs = VirtualHost(SimRig(fw, LinkModel()))
     vs.handshake()
     vs.query_line("G53G0X0Y0Z0")  # MPos 0,0,0: what a power-up without homing looks like
     vs.run_until(vs.now_s + 1.0)
@@ -229,7 +229,7 @@ def test_unhomed_machine_with_soft_limits_is_explained_not_jogged(tmp_path: obje
 
 def test_alarm_state_blocks_jogging_with_a_reason() -> None:
     vs = session(machine="hobby-router")
-    # A G-code move beyond the soft limit: ALARM:2, and no ok until a reset (facts §2).
+    # A G-code move beyond the soft limit: ALARM:2, and no ok until a reset (firmware-facts §2).
     vs.rig.host_send(b"G53G0X-1000\n", vs.now_s)
     vs.run_until(vs.now_s + 1.0)
     vs.rig.host_send(b"\x18", vs.now_s)
@@ -284,7 +284,7 @@ def test_engine_outputs_are_lines_and_realtime_bytes_only() -> None:
 
 def test_tuning_defaults_follow_the_firmware_facts() -> None:
     tuning = JogTuning()
-    assert tuning.committed_s == pytest.approx(0.05)  # 5 segments of 10 ms (facts §4.1)
+    assert tuning.committed_s == pytest.approx(0.05)  # 5 segments of 10 ms (firmware-facts §4.1)
     assert tuning.planner_reserve_blocks >= 1
 
 
@@ -307,7 +307,7 @@ def test_inch_reports_are_understood_and_jogs_stay_in_mm() -> None:
     assert all("G21" in line for line in lines if line.startswith("$J="))
 
 
-def _moved_after(vs: VirtualSession, t_s: float) -> float:
+def _moved_after(vs: VirtualHost, t_s: float) -> float:
     from bench import measure
 
     return measure.distance_after(vs.rig.trace, t_s)
@@ -322,13 +322,13 @@ def test_door_mid_jog_leaves_at_most_one_increment_and_cancels_it_on_resume() ->
     engine = vs.engine
     assert engine is not None
     assert engine.phase is Phase.IDLE
-    assert any("door" in e.text for e in engine.events)
+    assert any("door" in e.text for e in vs.events)
     assert vs.model.state == "Door"
     t_resume = vs.now_s
     vs.rig.host_send(b"~", vs.now_s)
     vs.run_until(vs.now_s + 2.0)
-    # A line still in the controller when the door opened runs after the resume (facts §3.1);
-    # the engine cancels it at once, so the machine moves at most one increment's worth.
+    # A line still in the controller when the door opened runs after the resume (firmware-facts
+    # §3.1); the engine cancels it at once, so the machine moves at most one increment's worth.
     assert _moved_after(vs, t_resume) <= 1.5
     assert vs.model.state == "Idle"
     assert not engine.busy()

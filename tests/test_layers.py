@@ -1,4 +1,4 @@
-"""The layers import one way: core <- sim, links, inputs <- session, handshake <- web, cli."""
+"""The layers import one way: core <- sim, links, inputs <- handshake, host, arbiter <- web, cli."""
 
 from __future__ import annotations
 
@@ -13,21 +13,25 @@ SRC = Path(__file__).resolve().parent.parent / "src" / "smoothjog"
 #: For each layer, the smoothjog packages/modules it may import (besides itself).
 ALLOWED: dict[str, set[str]] = {
     "core": set(),
+    "vclock": {"core"},
     "sim": {"core"},
     "links": {"core", "sim"},  # links/sim.py wraps the simulator in the Link contract
     "inputs": {"core"},
-    "handshake": {"core", "links"},
-    "session": {"core", "links", "handshake"},
-    "vsession": {"core", "sim", "inputs"},
+    "handshake": {"core"},
+    "host": {"core", "links", "handshake"},
+    "arbiter": {"core", "inputs"},
+    "virtual": {"core", "sim", "links", "inputs", "host", "vclock"},
     "config": {"core", "links"},  # it checks tcp:// URLs with the TCP link's own parser
-    "web": {"core", "links", "sim", "session", "handshake", "config", "inputs"},
+    "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs"},
     "cli": {
         "core",
         "sim",
         "links",
         "inputs",
-        "session",
-        "vsession",
+        "host",
+        "arbiter",
+        "vclock",
+        "virtual",
         "handshake",
         "config",
         "web",

@@ -1,9 +1,9 @@
 """Connect to a controller: ask `$I`, `$$`, `$G`, `$#` and `?`, fold the answers into a model.
 
-Queries go one at a time (send-response, facts §5.1): send a line, feed every line that comes back
-to the model, stop at its `ok` or `error:N`. Things a real controller does meanwhile are expected:
-a banner before the first answer (the reset that opening a USB port causes), a banner in the
-middle (a reset: the handshake starts over, once), `[MSG:...]` chatter, an Alarm state in which
+Queries go one at a time (send-response, firmware-facts §5.1): send a line, feed every line that
+comes back to the model, stop at its `ok` or `error:N`. Things a real controller does meanwhile are
+expected: a banner before the first answer (the reset that opening a USB port causes), a banner in
+the middle (a reset: the handshake starts over, once), `[MSG:...]` chatter, an Alarm state in which
 some queries get `error:8`/`error:9` (noted, not fatal). An `ok` that arrives without the content
 its query must produce is a stale reply to a line sent before a reset, and is skipped.
 """
@@ -13,10 +13,12 @@ from __future__ import annotations
 import asyncio
 import logging
 from dataclasses import dataclass
+from typing import Protocol
 
 from smoothjog.core.codes import describe_alarm, describe_error
 from smoothjog.core.errors import ConnectError
 from smoothjog.core.machine import MachineModel
+from smoothjog.core.realtime import STATUS_QUERY
 from smoothjog.core.responses import (
     Banner,
     BuildOptions,
@@ -33,7 +35,6 @@ from smoothjog.core.responses import (
     parse_response,
 )
 from smoothjog.core.units import ALL_AXES
-from smoothjog.links.base import Link
 
 logger = logging.getLogger(__name__)
 
@@ -44,8 +45,7 @@ FOREIGN_LINES_LIMIT = 20
 SETTLE_S = 0.1
 #: Banners survived during one handshake (see handshake()).
 MAX_RESETS = 2
-#: A status report is not made in some states (homing, after a limit alarm: facts §5.2).
-STATUS_QUERY = b"?"
+#: A status report is not made in some states (homing, after a limit alarm: firmware-facts §5.2).
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,13 +56,29 @@ class Query:
     expects: tuple[type[Response], ...]
 
 
-#: What a connect asks, in order (facts §5.3).
+#: What a connect asks, in order (firmware-facts §5.3).
 QUERIES: tuple[Query, ...] = (
     Query("$I", (VersionInfo, BuildOptions)),
     Query("$$", (SettingLine,)),
     Query("$G", (GcodeModes,)),
     Query("$#", (Parameter,)),
 )
+
+
+class QueryLink(Protocol):
+    """What the handshake talks through: a Link, or the host's port that routes by owner."""
+
+    async def send_line(self, text: str) -> None:
+        """Send one line (the `\\n` is added)."""
+
+    def send_realtime(self, byte: bytes) -> None:
+        """Send one realtime byte."""
+
+    async def read_line(self) -> bytes:
+        """The next line meant for the handshake; LinkError once the peer is gone."""
+
+    def describe(self) -> str:
+        """Where the controller is, for messages."""
 
 
 class ControllerResetError(ConnectError):
@@ -89,10 +105,16 @@ class QueryResult:
 class Querier:
     """Send-response queries over a link, feeding every received line to a model."""
 
-    def __init__(self, link: Link, model: MachineModel, *, timeout_s: float) -> None:
-        """Query over link into model; each query must be answered within timeout_s."""
+    def __init__(
+        self, link: QueryLink, model: MachineModel, *, timeout_s: float, feed: bool = True
+    ) -> None:
+        """Query over link into model; each query must be answered within timeout_s.
+
+        feed=False when the caller (the host) folds every received line into the model itself.
+        """
         self.link = link
         self.model = model
+        self.feed = feed
         self.timeout_s = timeout_s
         self.heard_grbl = False
         self.answered = 0
@@ -171,7 +193,8 @@ class Querier:
     def _take(self, raw: bytes) -> Response:
         """Parse a line, fold it into the model, and watch for a peer that is not Grbl."""
         response = parse_response(raw)
-        self.model.apply(response)
+        if self.feed:
+            self.model.apply(response)
         if isinstance(response, Unparsed):
             self.foreign.append(raw)
             self._foreign_run += 1
@@ -209,14 +232,18 @@ class Querier:
 
 
 async def handshake(
-    link: Link,
+    link: QueryLink,
     *,
     timeout_s: float = DEFAULT_TIMEOUT_S,
     model: MachineModel | None = None,
+    feed: bool = True,
 ) -> MachineModel:
-    """Ask the controller who and where it is; return the model built from its answers."""
+    """Ask the controller who and where it is; return the model built from its answers.
+
+    feed=False leaves folding the received lines into the model to the caller (the host).
+    """
     target = model if model is not None else MachineModel()
-    querier = Querier(link, target, timeout_s=timeout_s)
+    querier = Querier(link, target, timeout_s=timeout_s, feed=feed)
     await querier.settle()
     resets = resets_after_answers = 0
     while True:
@@ -241,17 +268,19 @@ async def _run_queries(querier: Querier) -> None:
     for query in QUERIES:
         result = await querier.ask(query)
         if isinstance(result.reply, ErrorReply):
-            # error:8/9 in Alarm or a busy state: the model keeps what it had (facts §1.2, §5.3).
+            # error:8/9 in Alarm or a busy state: the model keeps what it had (firmware-facts §1.2,
+            # §5.3).
             logger.info("%s answered %s", query.line, describe_error(result.reply.code))
     status = await querier.ask_status()
     if status is None:
-        # Grbl makes no report while homing or after a limit alarm (facts §5.2): go on without.
+        # Grbl makes no report while homing or after a limit alarm (firmware-facts §5.2): go on
+        # without.
         logger.info("no status report within %s s", querier.timeout_s)
 
 
 # --- the readable summary -------------------------------------------------------------------
 
-#: What each state means to someone at the machine (facts §5.4).
+#: What each state means to someone at the machine (firmware-facts §5.4).
 STATE_MEANINGS: dict[str, str] = {
     "Idle": "ready",
     "Run": "running a program",

@@ -2,6 +2,7 @@
 
 Without --port or --connect the script runs on the built-in simulator in virtual time (fast and
 repeatable; `--realtime` runs it on the wall clock instead). With a controller it runs in real time.
+Both are the same runner on the same host; only the event loop's clock differs (vclock.py).
 """
 
 from __future__ import annotations
@@ -19,16 +20,18 @@ from smoothjog.cli.common import (
     link_for,
 )
 from smoothjog.config import Config
+from smoothjog.core.firmware import FIRMWARE_NAMES
 from smoothjog.core.jogger import EngineEvent, Jogger, JogTuning
+from smoothjog.core.ledger import ENGINE
 from smoothjog.core.units import Vec
+from smoothjog.host import Host
 from smoothjog.inputs.replay import TimedIntent, load_replay
 from smoothjog.links.base import Link
 from smoothjog.links.sim import SimLink
-from smoothjog.session import JogSession
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import available_machine_profiles, get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
-from smoothjog.vsession import VirtualSession
+from smoothjog.vclock import VirtualClockLoop
 
 
 def register(subparsers: Any) -> None:
@@ -40,9 +43,7 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--replay", required=True, metavar="FILE", help="JSON Lines intents")
     add_connection_args(parser)
-    parser.add_argument(
-        "--firmware", choices=("grbl", "grblhal", "fluidnc"), help="simulated firmware"
-    )
+    parser.add_argument("--firmware", choices=FIRMWARE_NAMES, help="simulated firmware")
     parser.add_argument(
         "--machine",
         metavar="PROFILE",
@@ -69,6 +70,7 @@ class Summary:
     final_mpos: Vec | None = None
     final_state: str | None = None
     idle: bool = False
+    lines_sent: int = 0
     faults: list[str] = field(default_factory=list)
 
     def lines(self, where: str) -> list[str]:
@@ -81,6 +83,7 @@ class Summary:
         if self.distance_mm is not None:
             out.append(f"  distance        {self.distance_mm:.3f} mm (simulator ground truth)")
         out += [
+            f"  lines sent      {self.lines_sent}",
             f"  stops           {self.stops}",
             f"  tracked - real  {1000 * self.worst_tracking_mm:.2f} µm, "
             f"{self.worst_tracking_steps:.2f} steps (worst axis, worst stop)",
@@ -120,70 +123,63 @@ def run(args: argparse.Namespace) -> int:
     link = link_for(connection)
     firmware = args.firmware or config.sim.firmware
     machine = args.machine or config.sim.machine
-    if link is None and not args.realtime:
-        summary = _run_virtual(script, config, firmware, machine, args.settle)
-        where = f"the built-in simulator ({firmware}, {machine}, virtual time)"
+    if link is None:
+        fw = GrblFirmware(get_firmware_profile(firmware), machine)
+        sim_link = SimLink(rig=SimRig(fw, LinkModel()))
+        runner = _run(sim_link, script, config, connection.timeout_s, args.settle)
+        if args.realtime:
+            where = sim_link.describe()
+            summary = asyncio.run(runner)
+        else:
+            where = f"the built-in simulator ({firmware}, {machine}, virtual time)"
+            loop = VirtualClockLoop()
+            try:
+                summary = loop.run_until_complete(runner)
+            finally:
+                loop.close()
     else:
-        if link is None:
-            link = SimLink(GrblFirmware(get_firmware_profile(firmware), machine))
         where = link.describe()
-        summary = asyncio.run(_run_real(link, script, config, connection.timeout_s, args.settle))
+        summary = asyncio.run(_run(link, script, config, connection.timeout_s, args.settle))
     print("\n".join(summary.lines(where)))
     return 0 if summary.idle and not summary.faults else 1
 
 
-def _run_virtual(
-    script: list[TimedIntent], config: Config, firmware: str, machine: str, settle_s: float
-) -> Summary:
-    fw = GrblFirmware(get_firmware_profile(firmware), machine)
-    vs = VirtualSession(SimRig(fw, LinkModel()), tuning=_tuning(config), keepouts=config.keepouts)
-    vs.handshake()
-    engine = vs.engine
-    assert engine is not None
-    t0 = vs.now_s
-    events: list[EngineEvent] = []
-    for item in script:
-        vs.run_until(t0 + item.t_s)
-        vs.set_intent(item.intent)
-        events += engine.events
-        engine.events.clear()
-    summary = Summary()
-    summary.idle = vs.run_until_idle(settle_s)
-    events += engine.events
-    summary.duration_s = vs.now_s - t0
-    summary.distance_mm = sum(math.dist(s.start_mm, s.end_mm) for s in fw.trace if s.t0_s >= t0)
-    _fill(summary, engine, events)
-    return summary
-
-
-async def _run_real(
+async def _run(
     link: Link, script: list[TimedIntent], config: Config, timeout_s: float, settle_s: float
 ) -> Summary:
+    """Start a host on link, play the script on the loop's clock, wait for rest, summarise."""
     events: list[EngineEvent] = []
     async with link:
-        session = JogSession(
+        host = Host(
             link,
             tuning=_tuning(config),
             keepouts=config.keepouts,
             handshake_timeout_s=timeout_s,
             on_event=events.append,
         )
-        await session.start()
+        await host.start()
         loop = asyncio.get_running_loop()
         t0 = loop.time()
+        # The simulator's trace runs on its own clock (the same as the loop's in virtual time).
+        rig_t0 = link.rig.now_s if isinstance(link, SimLink) else 0.0
         summary = Summary()
         try:
             for item in script:
                 await asyncio.sleep(max(t0 + item.t_s - loop.time(), 0.0))
-                session.set_intent(item.intent)
+                host.set_intent(item.intent)
             try:
-                await session.wait_idle(settle_s)
+                await host.wait_idle(settle_s)
                 summary.idle = True
             except TimeoutError:
                 summary.idle = False
             summary.duration_s = loop.time() - t0
-            assert session.engine is not None
-            _fill(summary, session.engine, events)
+            if isinstance(link, SimLink):
+                summary.distance_mm = sum(
+                    math.dist(s.start_mm, s.end_mm) for s in link.rig.trace if s.t0_s >= rig_t0
+                )
+            assert host.engine is not None
+            _fill(summary, host.engine, events)
+            summary.lines_sent = host.ledger.stats.lines[ENGINE]
         finally:
-            await session.close()
+            await host.close()
     return summary

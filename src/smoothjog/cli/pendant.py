@@ -20,12 +20,13 @@ from smoothjog.cli.common import (
     connection_from_args,
     link_for,
 )
-from smoothjog.config import Config
+from smoothjog.config import DEFAULT_HTTP_PORT, Config
+from smoothjog.core.firmware import FIRMWARE_NAMES
 from smoothjog.core.jogger import EngineEvent, JogTuning
 from smoothjog.handshake import format_summary
+from smoothjog.host import Host
 from smoothjog.links.base import Link
 from smoothjog.links.sim import SimLink
-from smoothjog.session import JogSession
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import available_machine_profiles, get_firmware_profile
 from smoothjog.web.protocol import PendantError
@@ -42,7 +43,7 @@ def register(subparsers: Any) -> None:
     )
     add_connection_args(parser)
     sim = parser.add_argument_group("built-in simulator (when no --port/--connect)")
-    sim.add_argument("--firmware", choices=("grbl", "grblhal", "fluidnc"))
+    sim.add_argument("--firmware", choices=FIRMWARE_NAMES)
     sim.add_argument(
         "--machine",
         metavar="PROFILE",
@@ -50,7 +51,9 @@ def register(subparsers: Any) -> None:
     )
     web = parser.add_argument_group("pendant")
     web.add_argument("--host", help="address to serve on (default 127.0.0.1)")
-    web.add_argument("--http-port", type=int, metavar="N", help="HTTP port (default 8080)")
+    web.add_argument(
+        "--http-port", type=int, metavar="N", help=f"HTTP port (default {DEFAULT_HTTP_PORT})"
+    )
     web.add_argument(
         "--lan",
         action="store_true",
@@ -94,7 +97,7 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     async with link:
-        session = JogSession(
+        session = Host(
             link,
             tuning=JogTuning(
                 speed_ratios=dict(config.jog.speed_ratios),

@@ -22,7 +22,7 @@ from smoothjog.core.errors import LinkError
 from smoothjog.core.responses import Banner, parse_response
 from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
-#: Grbl's default baud rate (facts §5.1).
+#: Grbl's default baud rate (firmware-facts §5.1).
 DEFAULT_BAUD = 115200
 #: An Arduino-based Grbl resets when the port opens (DTR); its bootloader waits about 1-2 s before
 #: Grbl prints the banner.
@@ -117,7 +117,7 @@ class SerialLink(Link):
         """Put the byte ahead of every whole queued line, then write."""
         self._check_usable()
         # A line already partly written must finish first: grblHAL drops a half-read line on a
-        # jog cancel (facts §7), which would turn its second half into a garbled new line.
+        # jog cancel (firmware-facts §7), which would turn its second half into a garbled new line.
         self._out.insert(1 if self._head_written else 0, byte)
         self._flush()
 

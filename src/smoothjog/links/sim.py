@@ -15,10 +15,21 @@ from smoothjog.sim.serve import RealtimeSim
 class SimLink(Link):
     """The embedded simulated controller behind a modelled serial wire (115200 baud default)."""
 
-    def __init__(self, firmware: GrblFirmware | None = None, link: LinkModel | None = None) -> None:
-        """Wrap a firmware (default: Grbl 1.1h with default settings); open() starts it."""
-        self.firmware = firmware if firmware is not None else GrblFirmware()
-        self.rig = SimRig(self.firmware, link)
+    def __init__(
+        self,
+        firmware: GrblFirmware | None = None,
+        link: LinkModel | None = None,
+        *,
+        rig: SimRig | None = None,
+    ) -> None:
+        """Wrap a firmware (default: Grbl 1.1h with default settings), or a ready rig.
+
+        open() starts it on the event loop's clock (a virtual one in tests and the benchmark).
+        """
+        if rig is None:
+            rig = SimRig(firmware if firmware is not None else GrblFirmware(), link)
+        self.rig = rig
+        self.firmware = rig.firmware
         self._inbox = LineInbox()
         self._sim = RealtimeSim(self.rig, self._on_line)
         self._task: asyncio.Task[None] | None = None

@@ -16,7 +16,7 @@ import socket
 from smoothjog.core.errors import LinkError
 from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
-#: FluidNC's telnet port (facts §7); grblHAL's telnet plugin uses 23 as well.
+#: FluidNC's telnet port (firmware-facts §7); grblHAL's telnet plugin uses 23 as well.
 DEFAULT_TCP_PORT = 23
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 # Keepalive: first probe after 5 s of silence, then every 2 s, give up after 3 (about 11 s).

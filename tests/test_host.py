@@ -1,4 +1,4 @@
-"""JogSession in real time over the in-process simulator: jog, stop, reset, close, lost link."""
+"""The host in real time over the in-process simulator: jog, stop, reset, close, lost link."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pytest
 
 from smoothjog.core.errors import LinkError
 from smoothjog.core.jogger import ContinuousIntent, EngineEvent, StepIntent, StopIntent
+from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
-from smoothjog.session import JogSession
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 
@@ -35,7 +35,7 @@ async def eventually(condition: Callable[[], bool], what: str, timeout_s: float 
         await asyncio.sleep(0.005)
 
 
-async def close_within(session: JogSession, timeout_s: float = CLOSE_S) -> None:
+async def close_within(session: Host, timeout_s: float = CLOSE_S) -> None:
     """session.close(), failing the test (after cleaning up) if it does not return in time."""
     closer = asyncio.create_task(session.close())
     done, _ = await asyncio.wait({closer}, timeout=timeout_s)
@@ -52,18 +52,18 @@ async def close_within(session: JogSession, timeout_s: float = CLOSE_S) -> None:
             await asyncio.sleep(0.01)
         if task.done() and not task.cancelled():
             task.exception()  # retrieved: a LinkError from a task the link closed under
-    pytest.fail(f"JogSession.close() did not return within {timeout_s} s")
+    pytest.fail(f"Host.close() did not return within {timeout_s} s")
 
 
 @contextlib.asynccontextmanager
 async def open_session(
     firmware: str = "grbl",
-) -> AsyncIterator[tuple[JogSession, SimLink, list[EngineEvent]]]:
+) -> AsyncIterator[tuple[Host, SimLink, list[EngineEvent]]]:
     """A started session over a SimLink to a simulated hobby-router; closed afterwards."""
     link = SimLink(GrblFirmware(get_firmware_profile(firmware), "hobby-router"))
     await link.open()
     events: list[EngineEvent] = []
-    session = JogSession(link, handshake_timeout_s=WAIT_S, on_event=events.append)
+    session = Host(link, handshake_timeout_s=WAIT_S, on_event=events.append)
     try:
         await session.start()
         yield session, link, events
@@ -71,7 +71,7 @@ async def open_session(
         await close_within(session)
 
 
-def assert_at_rest_where_tracked(session: JogSession, link: SimLink) -> None:
+def assert_at_rest_where_tracked(session: Host, link: SimLink) -> None:
     """The controller is Idle and host and ground truth agree to within one step per axis."""
     assert link.firmware.status_state() == "Idle"
     assert session.model.state == "Idle"
@@ -103,7 +103,7 @@ async def test_start_returns_the_session_model() -> None:
     """The model start() returns is the one the session keeps up to date."""
     link = SimLink(GrblFirmware(machine="hobby-router"))
     await link.open()
-    session = JogSession(link, handshake_timeout_s=WAIT_S)
+    session = Host(link, handshake_timeout_s=WAIT_S)
     try:
         model = await session.start()
         assert model is session.model
@@ -216,7 +216,7 @@ async def test_close_while_jogging_stops_the_machine_first(firmware: str) -> Non
     """close() during a jog: the full stop, then the link closes; the machine is left at rest."""
     link = SimLink(GrblFirmware(get_firmware_profile(firmware), "hobby-router"))
     await link.open()
-    session = JogSession(link, handshake_timeout_s=WAIT_S)
+    session = Host(link, handshake_timeout_s=WAIT_S)
     try:
         await session.start()
         session.set_intent(ContinuousIntent({"X": -1.0, "Y": -0.5}, 1.0))

@@ -1,0 +1,495 @@
+"""The one host driver: a link, the line ledger, the machine model, and every owner on the wire.
+
+Everything smoothjog says to a controller goes through one `Host`, in real time or (with the loop
+of vclock.py) in virtual time against the simulator; there is no second driver. Three tasks run:
+
+- the reader: every received line is parsed once, folded into the machine model once, and then
+  routed: an `ok`/`error` goes to the owner of the oldest unanswered line (the ledger decides),
+  everything else (status reports, `ALARM`, `[MSG:]`, banners, query output) goes to everyone;
+- the ticker: polls the jog engine when something it can see happened (a line arrived, a new
+  intent, its own deadline) and writes what it returns;
+- a re-handshake when a banner says the controller reset mid-session.
+
+Owners other than the engine (the handshake, a user's console, a foreign sender) write through
+`write_line`, which waits for room in the controller's RX buffer; the engine checks the room
+itself (it sizes what it sends by it) and records its lines in the ledger as it makes them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol
+
+from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
+from smoothjog.core.jogger import (
+    ContinuousIntent,
+    EngineEvent,
+    EngineLimits,
+    EngineView,
+    Intent,
+    Jogger,
+    JogTuning,
+    Output,
+    SendLine,
+    StopIntent,
+)
+from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger
+from smoothjog.core.machine import KeepOut, MachineModel
+from smoothjog.core.realtime import JOG_CANCEL
+from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, parse_response
+from smoothjog.handshake import handshake
+from smoothjog.links.base import Link
+
+logger = logging.getLogger(__name__)
+
+#: States in which a controller with nothing queued is at rest as far as jogging goes.
+REST_STATES = frozenset({"Idle", "Alarm", "Door", "Hold"})
+
+
+class JogEngine(Protocol):
+    """What the host drives: smoothjog's Jogger, or a reference method in bench/."""
+
+    def set_intent(self, intent: Intent, now_s: float) -> None:
+        """Take the newest intent (raises JogBuildError for an invalid one)."""
+
+    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
+        """The reply to one of the engine's own lines (the ledger matched it)."""
+
+    def on_response(self, resp: Response, now_s: float) -> None:
+        """Any other line from the controller (already folded into the model)."""
+
+    def poll(self, now_s: float) -> list[Output]:
+        """What to send now; lines are already recorded in the ledger."""
+
+    def next_deadline_s(self, now_s: float) -> float:
+        """The latest time to be polled again."""
+
+    def busy(self) -> bool:
+        """True while the engine still has work in hand."""
+
+    def reset_machine(self, limits: EngineLimits) -> None:
+        """Start over after a re-handshake (the controller was reset)."""
+
+
+#: Builds the engine once the handshake has filled the model.
+EngineFactory = Callable[[MachineModel, Ledger], JogEngine]
+
+#: Called with every received line after it was routed: (response, raw line, time).
+LineListener = Callable[[Response, float], None]
+
+
+class _QueryPort:
+    """What the handshake talks to: lines out through the ledger, lines in as the host routes.
+
+    It has the shape of a Link (send_line, send_realtime, read_line, describe), so the one
+    handshake serves a bare link (smoothjog info, tests) and the host alike.
+    """
+
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        #: Lines routed to the handshake; None marks the end of the link.
+        self.queue: asyncio.Queue[bytes | None] = asyncio.Queue()
+
+    def describe(self) -> str:
+        return self.host.link.describe()
+
+    async def send_line(self, text: str) -> None:
+        await self.host.write_line(HANDSHAKE, text)
+
+    def send_realtime(self, byte: bytes) -> None:
+        self.host.send_realtime(HANDSHAKE, byte)
+
+    async def read_line(self) -> bytes:
+        raw = await self.queue.get()
+        if raw is None:
+            raise self.host.link_error or LinkError(f"{self.describe()} is closed")
+        return raw
+
+
+class Host:
+    """One controller connection: its link, ledger and model, and the owners writing to it."""
+
+    def __init__(
+        self,
+        link: Link,
+        *,
+        tuning: JogTuning | None = None,
+        keepouts: Sequence[KeepOut] = (),
+        handshake_timeout_s: float = 5.0,
+        on_event: Callable[[EngineEvent], None] | None = None,
+        engine_factory: EngineFactory | None = None,
+    ) -> None:
+        """Prepare a host over an opened link; call start() next."""
+        self.link = link
+        self.tuning = tuning or JogTuning()
+        self.keepouts = tuple(keepouts)
+        self.handshake_timeout_s = handshake_timeout_s
+        self.on_event = on_event
+        self.engine_factory = engine_factory
+        self.model = MachineModel()
+        self.ledger = Ledger()
+        #: The engine the host drives (None before start() or for a host without one).
+        self.driver: JogEngine | None = None
+        self.link_error: LinkError | None = None
+        #: An unexpected failure inside the host (it stopped driving the machine).
+        self.error: BaseException | None = None
+        #: Set by abandon(): smoothjog is gone as if its process died; the controller runs on.
+        self.abandoned = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
+        self._room: asyncio.Event | None = None
+        self._write_lock: asyncio.Lock | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._rehandshake_task: asyncio.Task[None] | None = None
+        self._port: _QueryPort | None = None
+        self._listeners: list[LineListener] = []
+        self._reply_handlers: dict[str, Callable[[Entry, Ok | ErrorReply, float], None]] = {
+            CONSOLE: _resolve_console_reply,
+        }
+
+    # ----------------------------------------------------------------- lifecycle
+    async def start(self, *, jog: bool = True) -> MachineModel:
+        """Start the reader, run the connect handshake, then (jog=True) the engine and ticker."""
+        self._loop = asyncio.get_running_loop()
+        self._wake = asyncio.Event()
+        self._room = asyncio.Event()
+        self._write_lock = asyncio.Lock()
+        self._tasks.append(asyncio.create_task(self._reader(), name="smoothjog-reader"))
+        try:
+            await self._handshake()
+        except BaseException:
+            await self._cancel_tasks()
+            raise
+        if jog:
+            self.model.set_keep_outs(self.keepouts)
+            self.driver = self._make_engine()
+            self._reply_handlers[ENGINE] = self.driver.on_reply
+            self._tasks.append(asyncio.create_task(self._ticker(), name="smoothjog-ticker"))
+        return self.model
+
+    def _make_engine(self) -> JogEngine:
+        if self.engine_factory is not None:
+            return self.engine_factory(self.model, self.ledger)
+        return Jogger(self.model, EngineLimits.from_model(self.model), self.tuning, self.ledger)
+
+    async def close(self, *, stop_timeout_s: float = 2.0) -> None:
+        """Stop any jog with the full handshake (bounded in time), then close the link."""
+        if self.driver is not None and self.link_error is None and not self.abandoned:
+            with contextlib.suppress(SmoothjogError, ValueError):
+                self.set_intent(StopIntent())
+            with contextlib.suppress(TimeoutError, LinkError):
+                await self.wait_idle(stop_timeout_s)
+        await self._cancel_tasks()
+        await self.link.close()
+
+    def abandon(self) -> None:
+        """Stop reading and writing at once, sending nothing (a client that dies mid-jog)."""
+        self.abandoned = True
+        for task in self._all_tasks():
+            task.cancel()
+
+    def _all_tasks(self) -> list[asyncio.Task[None]]:
+        extra = [self._rehandshake_task] if self._rehandshake_task is not None else []
+        return self._tasks + extra
+
+    async def _cancel_tasks(self) -> None:
+        tasks = self._all_tasks()
+        for task in tasks:
+            task.cancel()
+        # A task that died earlier has its error stored in self.error already.
+        await asyncio.gather(*tasks, return_exceptions=True)
+        self._tasks = []
+        self._rehandshake_task = None
+
+    # ----------------------------------------------------------------- inputs
+    def set_intent(self, intent: Intent) -> None:
+        """Hand the engine the newest intent; raises JogBuildError for an invalid one."""
+        self._engine().set_intent(intent, self.now_s())
+        self._poke()
+
+    def jog(self, axes: Mapping[str, float], speed: float) -> None:
+        """Shorthand for a continuous intent."""
+        self.set_intent(ContinuousIntent(dict(axes), speed))
+
+    def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
+        """Per-axis speed ratios in (0, 1]."""
+        self._jogger().set_speed_ratios(ratios)
+
+    # ----------------------------------------------------------------- other owners
+    async def write_line(self, owner: str, text: str, *, tag: object = None) -> Entry:
+        """Send a line for owner once the controller's RX buffer has room; return its entry."""
+        assert self._room is not None
+        assert self._write_lock is not None
+        while True:
+            if self.link_error is not None:
+                raise self.link_error
+            if self.ledger.fits(text):
+                break
+            self._room.clear()
+            await self._room.wait()
+        async with self._write_lock:
+            entry = self.ledger.record_line(owner, text, self.now_s(), tag)
+            await self.link.send_line(text)
+        return entry
+
+    def send_realtime(self, owner: str, byte: bytes) -> None:
+        """Send a realtime byte for owner, ahead of any line the link still holds."""
+        self.ledger.record_realtime(owner, byte)
+        self.link.send_realtime(byte)
+
+    async def query(self, text: str, *, timeout_s: float = 5.0) -> list[Response]:
+        """Send a console line; return what the controller printed up to and with its reply."""
+        loop = self._running_loop()
+        done: asyncio.Future[Ok | ErrorReply] = loop.create_future()
+        seen: list[Response] = []
+
+        def collect(resp: Response, now_s: float) -> None:
+            if not isinstance(resp, Ok | ErrorReply):
+                seen.append(resp)
+
+        self._listeners.append(collect)
+        try:
+            await self.write_line(CONSOLE, text, tag=done)
+            async with asyncio.timeout(timeout_s):
+                reply = await done
+        except TimeoutError:
+            raise ConnectError(
+                f"{self.link.describe()} did not answer {text!r} within {timeout_s} s"
+            ) from None
+        finally:
+            self._listeners.remove(collect)
+        return [*seen, reply]
+
+    def add_reply_handler(
+        self, owner: str, handler: Callable[[Entry, Ok | ErrorReply, float], None]
+    ) -> None:
+        """Give owner's replies to handler (a foreign sender's forwarder, say)."""
+        self._reply_handlers[owner] = handler
+
+    def add_line_listener(self, listener: LineListener) -> None:
+        """Call listener(response, now_s) after every received line."""
+        self._listeners.append(listener)
+
+    def add_listener(self, callback: Callable[[], None]) -> None:
+        """Call callback (no arguments) after every received line: the pendant's change signal."""
+        self._listeners.append(lambda _resp, _now: callback())
+
+    # ----------------------------------------------------------------- observation
+    @property
+    def engine(self) -> Jogger | None:
+        """smoothjog's own engine, when that is what the host drives."""
+        return self.driver if isinstance(self.driver, Jogger) else None
+
+    def now_s(self) -> float:
+        """The host's clock (the event loop's)."""
+        return self._running_loop().time()
+
+    def view(self) -> EngineView:
+        """The engine's snapshot now."""
+        return self._jogger().view(self.now_s())
+
+    def busy(self) -> bool:
+        """True while the engine has anything queued, streaming or stopping."""
+        return self._engine().busy()
+
+    def at_rest(self) -> bool:
+        """True when the engine has nothing in hand and the controller reports rest."""
+        return not self.busy() and self.model.state in REST_STATES
+
+    async def wait_idle(self, timeout_s: float) -> None:
+        """Wait until the engine is idle and the controller at rest; TimeoutError if not."""
+        async with asyncio.timeout(timeout_s):
+            while True:
+                if self.link_error is not None:
+                    raise self.link_error  # a controller that is gone is not idle
+                if self.at_rest():
+                    return
+                await asyncio.sleep(0.01)
+
+    # ----------------------------------------------------------------- internals
+    def _running_loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            raise RuntimeError("Host.start() has not run")
+        return self._loop
+
+    def _engine(self) -> JogEngine:
+        if self.driver is None:
+            raise RuntimeError("Host.start() has not run (or was started without jogging)")
+        return self.driver
+
+    def _jogger(self) -> Jogger:
+        engine = self.engine
+        if engine is None:
+            raise RuntimeError("this host drives no smoothjog engine")
+        return engine
+
+    def _poke(self) -> None:
+        if self._wake is not None:
+            self._wake.set()
+
+    async def _handshake(self) -> None:
+        port = _QueryPort(self)
+        self._port = port
+        try:
+            await handshake(port, timeout_s=self.handshake_timeout_s, model=self.model, feed=False)
+        finally:
+            self._port = None
+        self.ledger.capacity_bytes = self.model.rx_buffer_bytes
+
+    async def _reader(self) -> None:
+        try:
+            while True:
+                raw = await self.link.read_line()
+                self._on_line(raw, self.now_s())
+        except LinkError as exc:
+            self.link_error = exc
+            logger.error("%s", exc)
+            self._ended()
+        except Exception as exc:  # a bug must stop the machine, not vanish quietly
+            self._fail(exc)
+
+    def _on_line(self, raw: bytes, now_s: float) -> None:
+        """Parse, fold into the model, route by owner, fan out; wake the ticker."""
+        resp = parse_response(raw)
+        self.model.apply(resp)
+        port = self._port
+        driver = self.driver
+        if isinstance(resp, Ok | ErrorReply):
+            entry = self.ledger.on_reply()
+            assert self._room is not None
+            self._room.set()
+            if entry is None:
+                if port is not None:
+                    port.queue.put_nowait(raw)  # the handshake skips stale replies itself
+                else:
+                    logger.info("a reply arrived with no line waiting for one: %s", raw)
+            elif entry.owner == HANDSHAKE:
+                if port is not None:
+                    port.queue.put_nowait(raw)
+            else:
+                handler = self._reply_handlers.get(entry.owner)
+                if handler is not None:
+                    handler(entry, resp, now_s)
+        else:
+            if isinstance(resp, Banner):
+                dropped = self.ledger.reset()
+                if dropped:
+                    logger.info("the controller reset with %d lines unanswered", len(dropped))
+                _fail_console_entries(dropped)
+                assert self._room is not None
+                self._room.set()
+            if driver is not None:
+                driver.on_response(resp, now_s)
+            if port is not None:
+                port.queue.put_nowait(raw)
+            if isinstance(resp, Banner) and driver is not None and port is None:
+                self._start_rehandshake()
+        for listener in list(self._listeners):
+            try:
+                listener(resp, now_s)
+            except Exception:  # a listener's bug must not stop the machine's driver
+                logger.exception("a line listener failed")
+        self._flush_events()
+        self._poke()
+
+    def _start_rehandshake(self) -> None:
+        """The controller reset mid-session: read its settings again before any jog."""
+
+        async def run() -> None:
+            try:
+                await self._handshake()
+                self._engine().reset_machine(EngineLimits.from_model(self.model, self.keepouts))
+            except SmoothjogError as exc:  # e.g. a controller that keeps resetting
+                self._fail(exc)
+            finally:
+                self._rehandshake_task = None
+                self._poke()
+
+        self._rehandshake_task = asyncio.get_running_loop().create_task(
+            run(), name="smoothjog-rehandshake"
+        )
+
+    def _ended(self) -> None:
+        """The link is gone: wake everyone who waits so they see the error."""
+        if self._port is not None:
+            self._port.queue.put_nowait(None)
+        if self._room is not None:
+            self._room.set()
+        self._poke()
+
+    def _fail(self, exc: BaseException) -> None:
+        """Something broke inside the host: stop the machine if possible and say so."""
+        self.error = exc
+        logger.error("smoothjog stopped driving the controller: %s", exc)
+        with contextlib.suppress(LinkError, ValueError):
+            # Cancel whatever jog runs: the engine can no longer finish its handshake.
+            self.send_realtime(ENGINE, JOG_CANCEL)
+        if self.link_error is None:
+            self.link_error = LinkError(f"the session stopped: {exc}")
+        self._ended()
+
+    async def _ticker(self) -> None:
+        engine = self._engine()
+        assert self._wake is not None
+        assert self._write_lock is not None
+        try:
+            while self.link_error is None:
+                # Cleared before polling: a wake-up set while the outputs are written is kept.
+                self._wake.clear()
+                now = self.now_s()
+                if self._rehandshake_task is None:
+                    async with self._write_lock:
+                        for output in engine.poll(now):
+                            if isinstance(output, SendLine):
+                                await self.link.send_line(output.text)
+                            else:
+                                self.send_realtime(ENGINE, output.byte)
+                    self._flush_events()
+                    deadline = engine.next_deadline_s(now)
+                else:
+                    deadline = now + 0.01
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a
+                # cancellation that lands as the event fires, and close() would wait forever.
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(max(deadline - self.now_s(), 0.0)):
+                        await self._wake.wait()
+        except LinkError as exc:
+            self.link_error = exc
+            logger.error("%s", exc)
+            self._ended()
+        except Exception as exc:  # a bug must stop the machine, not vanish quietly
+            self._fail(exc)
+
+    def _flush_events(self) -> None:
+        engine = self.engine
+        if engine is None or not engine.events:
+            return
+        events, engine.events = engine.events, []
+        for event in events:
+            log = logger.warning if event.kind == "fault" else logger.info
+            log("%s%s", event.text, f" ({event.hint})" if event.hint else "")
+            if self.on_event is not None:
+                try:
+                    self.on_event(event)
+                except Exception:  # a listener's bug must not stop the machine's driver
+                    logger.exception("an event listener failed")
+
+
+def _resolve_console_reply(entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
+    """A console line was answered: wake the query() that sent it."""
+    future = entry.tag
+    if isinstance(future, asyncio.Future) and not future.done():
+        future.set_result(resp)
+
+
+def _fail_console_entries(entries: list[Entry]) -> None:
+    """Console lines lost to a reset: their query() gets an error instead of a hang."""
+    for entry in entries:
+        future = entry.tag
+        if entry.owner == CONSOLE and isinstance(future, asyncio.Future) and not future.done():
+            future.set_exception(
+                ConnectError(f"the controller reset before it answered {entry.text!r}")
+            )

@@ -1,0 +1,141 @@
+"""The host's line ledger in use: every owner's replies reach that owner, whoever else writes.
+
+These run the real Host on the virtual-clock loop against the simulator, without the jog engine
+(start(jog=False)), so only the routing is under test; tests/test_host.py jogs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import TypeVar
+
+import pytest
+
+from smoothjog.core.errors import ConnectError
+from smoothjog.core.ledger import CONSOLE, HANDSHAKE, Entry, foreign
+from smoothjog.core.responses import ErrorReply, GcodeModes, Ok, StatusReport
+from smoothjog.host import Host
+from smoothjog.links.sim import SimLink
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.rig import LinkModel, SimRig
+from smoothjog.vclock import VirtualClockLoop
+
+T = TypeVar("T")
+
+
+def run_virtual(body: Callable[[Host, SimLink], Awaitable[T]]) -> T:
+    """Start a jog-less host on a simulated hobby router in virtual time and run body."""
+    loop = VirtualClockLoop()
+
+    async def main() -> T:
+        link = SimLink(rig=SimRig(GrblFirmware(machine="hobby-router"), LinkModel()))
+        await link.open()
+        host = Host(link)
+        await host.start(jog=False)
+        try:
+            return await body(host, link)
+        finally:
+            await host.close()
+
+    try:
+        return loop.run_until_complete(main())
+    finally:
+        loop.close()
+
+
+def test_the_handshake_goes_through_the_ledger_and_sizes_it() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        assert host.ledger.stats.lines[HANDSHAKE] == 4  # $I $$ $G $#
+        assert host.ledger.stats.replies[HANDSHAKE] == 4
+        assert host.ledger.capacity_bytes == host.model.rx_buffer_bytes == 128
+        assert host.ledger.in_flight_bytes == 0
+
+    run_virtual(body)
+
+
+def test_a_console_query_returns_its_output_and_reply() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        got = await host.query("$G")
+        assert isinstance(got[0], GcodeModes)
+        assert isinstance(got[-1], Ok)
+        bad = await host.query("G5")
+        assert bad[-1] == ErrorReply(20)  # unsupported command: the console sees its own error
+
+    run_virtual(body)
+
+
+def test_interleaved_owners_each_get_their_own_replies() -> None:
+    """A foreign sender's lines and the console's, interleaved on the wire, never mix."""
+
+    async def body(host: Host, link: SimLink) -> None:
+        got: list[tuple[str, str, object]] = []
+
+        def on_foreign(entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
+            got.append((entry.owner, entry.text, resp))
+
+        host.add_reply_handler(foreign("cncjs"), on_foreign)
+        for k in range(30):
+            await host.write_line(foreign("cncjs"), "G5" if k % 3 == 0 else "$G")
+        replies = [await host.query(f"G4P0.00{k}") for k in range(5)]
+        await asyncio.sleep(0.5)
+        assert [r[-1] for r in replies] == [Ok()] * 5
+        assert len(got) == 30
+        assert [resp for _o, text, resp in got if text == "G5"] == [ErrorReply(20)] * 10
+        assert {resp for _o, text, resp in got if text == "$G"} == {Ok()}
+        assert host.ledger.stats.replies == {HANDSHAKE: 4, "foreign:cncjs": 30, CONSOLE: 5}
+        assert host.ledger.stats.unowned_replies == 0
+        # The controller never dropped a byte: every line was held until it fitted.
+        assert link.firmware.rx.dropped == 0
+
+    run_virtual(body)
+
+
+def test_write_line_waits_for_room_in_the_rx_buffer() -> None:
+    """Lines beyond what the controller's 128 bytes hold wait; none is counted past the size."""
+
+    async def body(host: Host, link: SimLink) -> None:
+        peak = 0
+
+        def watch(resp: object, now_s: float) -> None:
+            nonlocal peak
+            peak = max(peak, host.ledger.in_flight_bytes)
+
+        host.add_line_listener(watch)
+        line = "G4P0.01" + " " * 50  # 58 bytes: two fit, a third waits
+        await asyncio.gather(*(host.write_line(foreign("x"), line) for _ in range(6)))
+        assert host.ledger.in_flight_bytes <= 128
+        assert peak <= 128
+        await asyncio.sleep(0.5)
+        assert host.ledger.stats.replies[foreign("x")] == 6
+
+    run_virtual(body)
+
+
+def test_status_reports_reach_every_listener() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        seen: list[object] = []
+        host.add_line_listener(lambda resp, now_s: seen.append(resp))
+        host.send_realtime(CONSOLE, b"?")
+        await asyncio.sleep(0.05)
+        assert any(isinstance(r, StatusReport) for r in seen)
+        assert host.ledger.stats.realtime[CONSOLE] == 1
+
+    run_virtual(body)
+
+
+def test_a_console_line_lost_to_a_reset_fails_in_words() -> None:
+    """A reset empties the controller's buffer: the ledger forgets its lines, and says so."""
+
+    async def body(host: Host, link: SimLink) -> None:
+        dwell = asyncio.ensure_future(host.query("G4P2"))  # a 2 s dwell
+        waiting = asyncio.ensure_future(host.query("$G"))  # still in the RX buffer behind it
+        await asyncio.sleep(0.1)
+        host.send_realtime(CONSOLE, b"\x18")
+        with pytest.raises(ConnectError, match="reset before it answered '\\$G'"):
+            await waiting
+        await asyncio.gather(dwell, return_exceptions=True)
+        assert host.ledger.in_flight_bytes == 0
+        assert host.ledger.stats.lost_to_reset >= 1
+
+    run_virtual(body)
