@@ -60,3 +60,51 @@ def test_ray_box_helpers() -> None:
     assert (t, face) == (3.0, 0)
     t, face = inc.ray_box_entry((0.0, 1.0), (1.0, 0.0), (3.0, -1.0), (4.0, 1.0))
     assert t == math.inf  # running along a face is not entering
+
+
+@pytest.mark.parametrize("block_s", [0.0, -0.01, 1e-12], ids=["zero", "negative", "sub-ns"])
+def test_committed_time_of_degenerate_blocks_is_the_full_window(block_s: float) -> None:
+    """No usable block length: assume five full 10 ms segments, the most ever committed."""
+    assert inc.committed_s(block_s) == pytest.approx(0.050)
+
+
+@pytest.mark.parametrize(
+    ("queued_mm", "speed", "new_speed", "reverse", "expected_s"),
+    [
+        pytest.param(0.0, 0.0, V, True, V / A, id="from-rest"),
+        pytest.param(10.0, V / 2, V, False, (V / 2) / A, id="speeding-up"),
+        pytest.param(
+            50.0,
+            V,
+            V / 2,
+            False,
+            (50.0 - (V**2 - (V / 2) ** 2) / (2 * A) - (V / 2) ** 2 / (2 * A)) / V + (V / 2) / A,
+            id="slowing-down",
+        ),
+    ],
+)
+def test_let_run_turn_times(
+    queued_mm: float, speed: float, new_speed: float, reverse: bool, expected_s: float
+) -> None:
+    got = inc.let_run_turn_s(queued_mm, speed, new_speed, A, reverse=reverse)
+    assert got == pytest.approx(expected_s)
+
+
+@pytest.mark.parametrize(
+    ("start", "unit_vec", "expected"),
+    [
+        pytest.param((5.0, 0.0), (-1.0, 0.0), (1.0, 0), id="from-the-far-side"),
+        pytest.param((0.0, 5.0), (1.0, 0.0), (math.inf, None), id="passes-beside"),
+        pytest.param((0.0, 0.0), (-1.0, 0.0), (math.inf, None), id="moving-away"),
+        pytest.param((3.5, 0.0), (1.0, 0.0), (math.inf, None), id="already-inside"),
+        pytest.param((0.0, -4.0), (0.6, 0.8), (5.0, 0), id="diagonal-through-a-side"),
+        pytest.param((3.5, -3.0), (0.0, 1.0), (2.0, 1), id="through-the-bottom"),
+    ],
+)
+def test_ray_box_entry_cases(
+    start: tuple[float, float], unit_vec: tuple[float, float], expected: tuple[float, int | None]
+) -> None:
+    """A box from (3, -1) to (4, 1): where a ray enters its interior, if ever."""
+    t, face = inc.ray_box_entry(start, unit_vec, (3.0, -1.0), (4.0, 1.0))
+    assert t == pytest.approx(expected[0])
+    assert face == expected[1]

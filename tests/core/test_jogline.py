@@ -180,3 +180,9 @@ def test_format_number_is_readable_by_grbl(value: float) -> None:
     assert "e" not in text.lower()
     assert sum(c.isdigit() for c in text) <= 8
     assert abs(float(text) - value) <= max(0.5e-4, 1e-7 * abs(value)) + 1e-12
+
+
+def test_format_number_refuses_negative_decimals() -> None:
+    """A caller's bug, not a user's input: ValueError, not JogBuildError."""
+    with pytest.raises(ValueError, match="decimals must be >= 0"):
+        format_number(1.0, -1)

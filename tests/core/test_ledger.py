@@ -108,3 +108,11 @@ def test_realtime_bytes_take_no_room() -> None:
 def test_an_impossible_rx_size_is_refused(capacity: int) -> None:
     with pytest.raises(LedgerError, match="impossible"):
         Ledger(capacity)
+
+
+def test_the_rx_size_can_be_set_after_the_handshake() -> None:
+    """The host sizes its ledger from `[OPT:]` once the handshake has read it."""
+    ledger = Ledger()
+    assert ledger.capacity_bytes == 128
+    ledger.capacity_bytes = 1024
+    assert (ledger.capacity_bytes, ledger.free_bytes) == (1024, 1024)

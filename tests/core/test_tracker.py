@@ -232,3 +232,11 @@ def test_drop_and_reset_forget_the_path() -> None:
     assert (track.path, track.end_mm, track.x_est_mm) == ([], None, 3.0)
     track.reset()
     assert (track.x_est_mm, track.v_est_mm_s) == (0.0, 0.0)
+
+
+def test_point_at_on_an_empty_path_is_its_end() -> None:
+    """With every jog removed the position along the path is where the path ended."""
+    track = tracker()
+    assert track.point_at(5.0) == (0.0, 0.0, 0.0)
+    track.drop()
+    assert track.point_at(5.0) == ()
