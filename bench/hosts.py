@@ -67,9 +67,10 @@ class _Host:
         else:
             self.release(now_s)
 
-    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
-        """One of this method's lines was answered."""
+    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> bool:
+        """One of this method's lines was answered; poll the method at once."""
         self.on_line_reply(entry.text, resp, now_s)
+        return True
 
     def on_response(self, resp: Response, now_s: float) -> None:
         """Other lines: the host has folded them into the model already."""

@@ -55,8 +55,8 @@ class JogEngine(Protocol):
     def set_intent(self, intent: Intent, now_s: float) -> None:
         """Take the newest intent (raises JogBuildError for an invalid one)."""
 
-    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
-        """The reply to one of the engine's own lines (the ledger matched it)."""
+    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> bool:
+        """The reply to one of the engine's own lines; True to be polled at once."""
 
     def on_response(self, resp: Response, now_s: float) -> None:
         """Any other line from the controller (already folded into the model)."""
@@ -166,7 +166,6 @@ class Host:
         if jog:
             self.model.set_keep_outs(self.keepouts)
             self.driver = self._make_engine()
-            self._reply_handlers[ENGINE] = self.driver.on_reply
             self._tasks.append(asyncio.create_task(self._ticker(), name="smoothjog-ticker"))
         return self.model
 
@@ -355,6 +354,7 @@ class Host:
         """Parse, fold into the model, route by owner, fan out; wake the ticker."""
         resp = parse_response(raw)
         self.model.apply(resp)
+        poke = True
         port = self._port
         driver = self.driver
         if isinstance(resp, Ok | ErrorReply):
@@ -369,6 +369,9 @@ class Host:
             elif entry.owner == HANDSHAKE:
                 if port is not None:
                     port.queue.put_nowait(raw)
+            elif entry.owner == ENGINE and driver is not None:
+                # The engine says whether the reply needs a poll; other lines always get one.
+                poke = driver.on_reply(entry, resp, now_s)
             else:
                 handler = self._reply_handlers.get(entry.owner)
                 if handler is not None:
@@ -393,7 +396,8 @@ class Host:
             except Exception:  # a listener's bug must not stop the machine's driver
                 logger.exception("a line listener failed")
         self._flush_events()
-        self._poke()
+        if poke:
+            self._poke()
 
     def _start_rehandshake(self) -> None:
         """The controller reset mid-session: read its settings again before any jog."""
@@ -433,6 +437,7 @@ class Host:
 
     async def _ticker(self) -> None:
         engine = self._engine()
+        loop = self._running_loop()
         assert self._wake is not None
         assert self._write_lock is not None
         try:
@@ -451,11 +456,14 @@ class Host:
                     deadline = engine.next_deadline_s(now)
                 else:
                     deadline = now + 0.01
-                # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a
-                # cancellation that lands as the event fires, and close() would wait forever.
-                with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(max(deadline - self.now_s(), 0.0)):
-                        await self._wake.wait()
+                # A timer that sets the wake-up event, not asyncio.timeout: a timeout that
+                # expires raises and catches an exception on every top-up of a held jog (about
+                # a hundred a second), which costs more CPU than the engine's whole poll.
+                timer = loop.call_at(deadline, self._wake.set)
+                try:
+                    await self._wake.wait()
+                finally:
+                    timer.cancel()
         except LinkError as exc:
             self.link_error = exc
             logger.error("%s", exc)

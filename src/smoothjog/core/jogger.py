@@ -85,6 +85,9 @@ __all__ = [
 SYNC_LINE = "G4P0"
 #: Grbl's slowest feed (MINIMUM_FEED_RATE, 1 mm/min, firmware-facts §4.2), in mm/s.
 MIN_FEED_MM_S = 1.0 / 60.0
+#: A queue within this of its target is topped up: the wake-up computed for the instant the
+#: queue reaches its target must send then, not find a rounding error's worth still queued.
+QUEUE_TOLERANCE_MM = 1e-6
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 32
 
@@ -149,8 +152,10 @@ class JogTuning:
     #: and of the link. Nothing jitters in virtual time, so the engine's default is 0; the
     #: real-time commands take it from the config ([jog] link_margin_s, 5 ms by default).
     link_margin_s: float = 0.0
-    #: How often the engine wants to be polled while jogging (the top-up check).
+    #: The shortest wait between two polls the engine asks for (it plans its own wake-ups).
     tick_s: float = 0.001
+    #: How often the engine looks while a queue runs out or steps wait for planner room.
+    settle_tick_s: float = 0.005
     #: Wire time of one byte from the controller (115200 8N1: 86.8 µs); a status report's position
     #: is as old as its bytes took to arrive (firmware-facts §6). Overstating it only makes the
     #: queue longer, never too short.
@@ -306,6 +311,10 @@ class Jogger:
         self._cancel_owed = False
         self._pending_desync = False
         self._ratios = dict(self.tuning.speed_ratios)
+        self._ratios_version = 0
+        self._velocity_cache: (
+            tuple[ContinuousIntent, int, EngineLimits, inc.VectorMove | None] | None
+        ) = None
         #: The engine's own lines in the ledger, oldest first.
         self._pending: deque[Entry] = deque()
         self._steps: deque[StepIntent | GotoIntent] = deque()
@@ -319,6 +328,10 @@ class Jogger:
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
+        #: When the streaming queue needs its next top-up (None: a reply will say).
+        self._wake_at_s: float | None = None
+        #: The last poll held a line back for want of room in the controller's RX buffer.
+        self._rx_blocked = False
         self._commanded = inc.VectorMove((0.0,) * len(limits.axes), 0.0, 1.0)
 
     @property
@@ -381,6 +394,11 @@ class Jogger:
                 self._consider_turn(self._commanded, now_s)
         self._acted_intent = intent
 
+    @property
+    def planned_end_mm(self) -> Vec | None:
+        """Where the last jog sent ends (machine mm): the machine never goes beyond it."""
+        return self._track.end_mm
+
     def busy(self) -> bool:
         """True while anything is queued, streaming or stopping, or an intent is held."""
         return self.phase is not Phase.IDLE or bool(self._steps) or self._intent is not None
@@ -393,9 +411,16 @@ class Jogger:
             if not (0.0 < r <= 1.0):
                 raise JogBuildError(f"speed ratio {r!r} for {axis} must be in (0, 1]")
         self._ratios.update(ratios)
+        self._ratios_version += 1
 
-    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:
-        """The reply to one of the engine's own lines (the ledger matched it to entry)."""
+    def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> bool:
+        """The reply to one of the engine's own lines (the ledger matched it to entry).
+
+        Returns whether the engine has anything to do at once. The `ok` of a jog while the
+        stream runs normally changes nothing a poll would act on (the queue is sized in
+        distance, not in lines), so the host need not poll for it: half the wake-ups of a
+        held jog (about 95 a second at full speed) are saved that way.
+        """
         if not self._pending or self._pending[0] is not entry:
             # Grbl answers in order, so the engine's oldest line is the one answered; anything
             # else means the ledger was reset under us. Never act on a reply we cannot place.
@@ -404,9 +429,18 @@ class Jogger:
             )
             if entry in self._pending:
                 self._pending.remove(entry)
-            return
+            return True
         self._pending.popleft()
+        first_ack = not self._track.moving_since_ack
         self._on_reply(entry, resp, now_s)
+        routine = (
+            self.phase is Phase.JOGGING
+            and isinstance(resp, Ok)
+            and _kind(entry) == "jog"
+            and not first_ack  # the estimate starts moving: the wake-up time changes
+            and not self._rx_blocked  # the RX buffer held a line back: there is room now
+        )
+        return not routine
 
     def on_response(self, resp: Response, now_s: float) -> None:
         """Any other line the controller sent (the host has folded it into the model)."""
@@ -440,6 +474,8 @@ class Jogger:
     def poll(self, now_s: float) -> list[Output]:
         """Everything to send now; call on every reply and at least every next_deadline_s()."""
         out: list[Output] = []
+        self._wake_at_s = None
+        self._rx_blocked = False
         self._track.update_estimate(now_s)
         self._track.prune()
         self._act_on_intent(now_s)
@@ -469,10 +505,25 @@ class Jogger:
         return out
 
     def next_deadline_s(self, now_s: float) -> float:
-        """The latest time the driver should call poll again."""
-        if self.phase is Phase.IDLE and self._intent is None and not self._steps:
-            return now_s + self.tuning.poll_idle_s
-        return now_s + self.tuning.tick_s
+        """The latest time the driver should call poll again (it also polls on every reply).
+
+        Nothing is polled on a fixed tick: the engine wakes when its queue will have drained to
+        the target (or the planner freed a block), when a status report is due, and while a
+        queue runs out or steps wait for room, every settle_tick_s. Replies and reports wake it
+        anyway, so a wait on the controller costs nothing.
+        """
+        asked_s = self._status_asked_s
+        if asked_s is not None:
+            due_s = asked_s + self.tuning.status_timeout_s  # re-ask if the report never came
+        elif self._status_urgent():
+            due_s = now_s
+        else:
+            due_s = self._last_status_sent_s + self._poll_interval_s()
+        if self.phase is Phase.JOGGING and self._wake_at_s is not None:
+            due_s = min(due_s, self._wake_at_s)
+        elif self.phase in (Phase.SETTLING, Phase.STEPPING):
+            due_s = min(due_s, now_s + self.tuning.settle_tick_s)
+        return max(due_s, now_s + self.tuning.tick_s)
 
     # ----------------------------------------------------------------- continuous jogging
     def _velocity(self) -> inc.VectorMove | None:
@@ -480,6 +531,20 @@ class Jogger:
         intent = self._intent
         if not isinstance(intent, ContinuousIntent):
             return None
+        # A held stick asks the same at every poll (about a hundred a second): computed once.
+        cache = self._velocity_cache
+        if (
+            cache is not None
+            and cache[0] is intent
+            and cache[1] == self._ratios_version
+            and cache[2] is self.limits
+        ):
+            return cache[3]
+        move = self._velocity_of(intent)
+        self._velocity_cache = (intent, self._ratios_version, self.limits, move)
+        return move
+
+    def _velocity_of(self, intent: ContinuousIntent) -> inc.VectorMove | None:
         base_mm_s = mm_min_to_mm_s(self._max_feed_mm_min()) * intent.speed
         vel = tuple(
             intent.axes.get(axis, 0.0) * self._ratios.get(axis, 1.0) * base_mm_s
@@ -558,9 +623,15 @@ class Jogger:
             # out, or the planner brakes below the new speed.
             speed_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
             target_mm = inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, ahead_s)
-            if queued_mm >= target_mm:
+            if queued_mm >= target_mm + QUEUE_TOLERANCE_MM:
+                # Nothing to send until the queue has drained to its target.
+                self._wake_at_s = self._run_time_s(now_s, queued_mm - target_mm, move)
                 return
             if blocks >= usable_blocks:
+                # The planner is as full as the engine lets it be until a block is committed.
+                lead_mm = self._track.uncommitted_lead_mm()
+                if lead_mm is not None:
+                    self._wake_at_s = self._run_time_s(now_s, lead_mm, move)
                 return
             # Blocks of the planned duration, but never so short that the queue needs more of
             # them than the engine allows itself: while slowing from a higher speed the queue
@@ -578,6 +649,15 @@ class Jogger:
             if not self._send_increment(move, length_mm, now_s, out):
                 return
             blocks += 1
+
+    def _run_time_s(self, now_s: float, dist_mm: float, move: inc.VectorMove) -> float | None:
+        """When the machine will have run dist_mm further, at the faster of its estimated and
+        commanded speed (so an accelerating machine is never woken for too late); None at rest.
+        """
+        speed_mm_s = max(self._track.v_est_mm_s, move.speed_mm_s)
+        if not self._track.moving_since_ack or speed_mm_s <= 0.0:
+            return None  # nothing drains before the first ok: that reply wakes the engine
+        return now_s + dist_mm / speed_mm_s
 
     def _send_increment(
         self, move: inc.VectorMove, length_mm: float, now_s: float, out: list[Output]
@@ -609,6 +689,7 @@ class Jogger:
             max_line_chars=self.limits.max_line_chars,
         )
         if not self._fits_rx(line):
+            self._rx_blocked = True
             return False
         seg_len = norm(tuple(e - s for e, s in zip(end, start, strict=True)))
         seg = PathSeg(
@@ -708,6 +789,7 @@ class Jogger:
                 continue
             line, seg = line_seg
             if not self._fits_rx(line):
+                self._rx_blocked = True
                 return
             self._steps.popleft()
             self._track.append(seg)
@@ -986,18 +1068,22 @@ class Jogger:
                 self._fresh_status_wanted = False
                 self._finish_stop(now_s, cancelled=False, recancels=0)
 
+    def _status_urgent(self) -> bool:
+        """A report is needed now: to end a stop, or a queue the estimate says has run out."""
+        return self._fresh_status_wanted and (
+            (self.phase is Phase.SETTLING and self._track.at_rest_at_end())
+            or (self.phase is Phase.STOPPING and self._stop.phase is StopPhase.WAIT_STATUS)
+        )
+
+    def _poll_interval_s(self) -> float:
+        busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
+        return self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
+
     def _poll_status(self, now_s: float, out: list[Output]) -> None:
         asked = self._status_asked_s
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
-        settled = self._track.at_rest_at_end()
-        urgent = self._fresh_status_wanted and (
-            (self.phase is Phase.SETTLING and settled)
-            or (self.phase is Phase.STOPPING and self._stop.phase is StopPhase.WAIT_STATUS)
-        )
-        busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
-        interval = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
-        if urgent or now_s - self._last_status_sent_s >= interval:
+        if self._status_urgent() or now_s - self._last_status_sent_s >= self._poll_interval_s():
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s
             self._last_status_sent_s = now_s

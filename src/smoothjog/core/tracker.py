@@ -129,6 +129,20 @@ class PathTracker:
             count += 1
         return count
 
+    def uncommitted_lead_mm(self) -> float | None:
+        """How far the machine runs until the oldest block not yet committed becomes committed.
+
+        blocks_in_planner() counts one block fewer from then on; None when none is counted.
+        """
+        committed_end = self.x_est_mm + self.v_est_mm_s * self.committed_s
+        oldest_end: float | None = None
+        for seg in reversed(self.path):
+            end = seg.x0_mm + seg.length_mm
+            if end <= committed_end:
+                break
+            oldest_end = end
+        return None if oldest_end is None else oldest_end - committed_end
+
     def longest_queued_s(self, block_s: float) -> float:
         """Duration of the longest jog not yet finished, or block_s if that is longer."""
         longest_s = block_s
@@ -225,6 +239,14 @@ class PathTracker:
         steps = max(1, math.ceil(dt / 0.002))
         h = dt / steps
         end_x = self.length_mm()
+        index = self.seg_index_at(self.x_est_mm)
+        if index is not None and self._cruises(index, self.v_est_mm_s * dt, end_x):
+            # Hot path (every poll of a held jog): at full speed with nothing to brake for in
+            # this window, each step below would keep v and add v*h; do just that.
+            step_mm = self.v_est_mm_s * h
+            for _ in range(steps):
+                self.x_est_mm += step_mm
+            return
         for _ in range(steps):
             index = self.seg_index_at(self.x_est_mm)
             if index is None:
@@ -239,6 +261,36 @@ class PathTracker:
                 self.v_est_mm_s = max(v_cap, self.v_est_mm_s - a * h)
             self.x_est_mm = min(self.x_est_mm + self.v_est_mm_s * h, end_x)
 
+    def _cruises(self, index: int, dist_mm: float, end_x: float) -> bool:
+        """True when the estimate runs dist_mm on at its current speed, which is its block's.
+
+        That holds when the speed is the block's own, every block the window enters has the same
+        speed and acceleration, and no junction or the end of the queue needs braking before
+        the window ends: then speed_cap_mm_s() would return that speed at every step.
+        """
+        path = self.path
+        seg = path[index]
+        v = self.v_est_mm_s
+        a = seg.accel_mm_s2
+        if v <= 0.0 or v != seg.speed_mm_s:
+            return False
+        x_end = self.x_est_mm + dist_mm
+        v_sq = v * v
+        if 2.0 * a * (end_x - x_end) < v_sq:
+            return False  # braking for the end of the queue may start inside the window
+        reach_mm = v_sq / (2.0 * a)
+        for nxt in path[index + 1 :]:
+            if nxt.x0_mm - x_end > reach_mm:
+                break
+            if nxt.accel_mm_s2 != a:
+                return False
+            if nxt.x0_mm <= x_end and nxt.speed_mm_s != v:
+                return False  # the window enters a block of another speed
+            ahead = max(nxt.x0_mm - x_end, 0.0)
+            if nxt.entry_cap_mm_s**2 + 2.0 * a * ahead < v_sq:
+                return False  # a junction ahead needs braking inside the window
+        return True
+
     def correct_estimate(self, mpos: Vec, age_s: float) -> bool:
         """Pull the estimate onto the reported position (projected on the path).
 
@@ -252,6 +304,8 @@ class PathTracker:
         tolerance_mm = 2.0 / min(self.steps_per_mm) + 1e-6
         best: float | None = None
         for seg in self.path:
+            if _outside_box(mpos, seg.start_mm, seg.end_mm, tolerance_mm):
+                continue  # farther than the tolerance from the segment's box, so from it too
             d, along = project(mpos, seg.start_mm, seg.end_mm)
             if d > tolerance_mm:
                 continue
@@ -315,6 +369,21 @@ class PathTracker:
     def steps_from(self, a: Sequence[float], b: Sequence[float]) -> float:
         """Distance between two positions in steps of the worst axis."""
         return max(abs(x - y) * spm for x, y, spm in zip(a, b, self.steps_per_mm, strict=True))
+
+
+def _outside_box(p: Vec, a: Vec, b: Vec, margin_mm: float) -> bool:
+    """True when p lies more than margin_mm outside the axis-aligned box around segment ab.
+
+    A cheap test that skips most segments of the kept path before the exact projection (a
+    status report is checked against every one, 20 times a second).
+    """
+    for pi, ai, bi in zip(p, a, b, strict=True):
+        if ai <= bi:
+            if pi < ai - margin_mm or pi > bi + margin_mm:
+                return True
+        elif pi < bi - margin_mm or pi > ai + margin_mm:
+            return True
+    return False
 
 
 def project(p: Vec, a: Vec, b: Vec) -> tuple[float, float]:
