@@ -139,3 +139,56 @@ def test_a_console_line_lost_to_a_reset_fails_in_words() -> None:
         assert host.ledger.stats.lost_to_reset >= 1
 
     run_virtual(body)
+
+
+def test_a_second_writer_during_a_held_jog_changes_nothing_for_either() -> None:
+    """CNCjs-style `$G` every 400 ms and `?` every 250 ms while smoothjog streams a jog.
+
+    The engine gets only its own replies, the other writer all of its own, no byte is ever
+    dropped by the controller's RX buffer, and the jog holds its speed and stops on the path.
+    """
+    from bench import measure
+
+    from smoothjog.core.jogger import ContinuousIntent, StopIntent
+    from smoothjog.core.ledger import ENGINE
+    from smoothjog.virtual import VirtualHost
+
+    rig = SimRig(GrblFirmware(machine="hobby-router"), LinkModel())
+    with VirtualHost(rig) as vs:
+        vs.handshake()
+        other = foreign("cncjs")
+        answers: list[Ok | ErrorReply] = []
+        vs.host.add_reply_handler(other, lambda entry, resp, now_s: answers.append(resp))
+
+        async def status_polls() -> None:
+            for _ in range(20):
+                vs.host.send_realtime(other, b"?")
+                await asyncio.sleep(0.25)
+
+        async def gcode_polls() -> None:
+            for _ in range(12):
+                await vs.host.write_line(other, "$G")
+                await asyncio.sleep(0.4)
+
+        t0 = vs.now_s
+        tasks = [vs.loop.create_task(status_polls()), vs.loop.create_task(gcode_polls())]
+        vs.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+        vs.run_until(t0 + 5.0)
+        vs.set_intent(StopIntent())
+        assert vs.run_until_idle(5.0)
+        vs.run_until(vs.now_s + 0.5)
+        assert all(t.done() for t in tasks)
+        engine = vs.engine
+        assert engine is not None
+        stats = vs.host.ledger.stats
+        assert stats.unowned_replies == 0
+        assert stats.replies[ENGINE] == stats.lines[ENGINE] == engine.stats.lines_sent
+        assert len(answers) == stats.lines[other] == 12
+        assert set(answers) == {Ok()}
+        assert engine.stats.error_replies == 0
+        assert rig.firmware.rx.dropped == 0
+        assert not [e for e in vs.events if e.kind == "fault"]
+        share, dips = measure.hold_quality(rig.trace, t0 + 0.5, t0 + 5.0, 5000 / 60)
+        assert share > 0.98
+        assert dips == 0
+        assert engine.stats.stops[-1].tracked_error_steps <= 1.0

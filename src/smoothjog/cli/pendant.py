@@ -14,6 +14,7 @@ import signal
 import sys
 from typing import Any
 
+from smoothjog.arbiter import Arbiter
 from smoothjog.cli.common import (
     add_connection_args,
     config_from_args,
@@ -110,10 +111,15 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
         model = await session.start()
         print(format_summary(model), flush=True)
         backend = SessionBackend(session, speed_ratios=config.jog.speed_ratios)
+        # One arbiter for the session: every input (the pages now, devices beside them) asks
+        # it for control, and it owns the dead-man lease and the stop when an input goes away.
+        arbiter = Arbiter(backend)
         host = args.host or config.pendant.host
         port = args.http_port if args.http_port is not None else config.pendant.port
         lan = bool(args.lan or config.pendant.lan)
-        server = asyncio.create_task(run_pendant(backend, host=host, port=port, lan=lan))
+        server = asyncio.create_task(
+            run_pendant(backend, host=host, port=port, lan=lan, arbiter=arbiter)
+        )
         waiter = asyncio.create_task(stop.wait())
         try:
             await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
