@@ -14,7 +14,8 @@ import time
 from dataclasses import dataclass, field
 
 from smoothjog.core.errors import SmoothjogError
-from smoothjog.core.jogger import ContinuousIntent, EngineEvent, Intent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
+from smoothjog.core.jogger import EngineEvent
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.responses import GcodeModes
 from smoothjog.sim.firmware import GrblFirmware

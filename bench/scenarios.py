@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from bench import measure
-from smoothjog.core.jogger import ContinuousIntent
+from smoothjog.core.intents import ContinuousIntent
 from smoothjog.core.units import mm_min_to_mm_s
 from smoothjog.host import EngineFactory
 from smoothjog.sim.firmware import GrblFirmware

@@ -11,7 +11,7 @@ import pytest
 
 from smoothjog.arbiter import Arbiter, Lease
 from smoothjog.core.errors import InputRefused, JogBuildError, SmoothjogError
-from smoothjog.core.jogger import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, LeaseExpired, Notice
 
 LEASE_S = 0.15

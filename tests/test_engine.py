@@ -8,15 +8,8 @@ import math
 import pytest
 
 from smoothjog.core.errors import JogBuildError
-from smoothjog.core.jogger import (
-    ContinuousIntent,
-    GotoIntent,
-    JogTuning,
-    Phase,
-    SendLine,
-    StepIntent,
-    StopIntent,
-)
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent, StopIntent
+from smoothjog.core.jogger import JogTuning, Phase, SendLine
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.responses import GcodeModes
 from smoothjog.sim.firmware import GrblFirmware

@@ -10,7 +10,8 @@ from collections.abc import AsyncIterator, Callable, Mapping
 import pytest
 
 from smoothjog.core.errors import LinkError
-from smoothjog.core.jogger import ContinuousIntent, EngineEvent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
+from smoothjog.core.jogger import EngineEvent
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware

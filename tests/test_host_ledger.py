@@ -149,7 +149,7 @@ def test_a_second_writer_during_a_held_jog_changes_nothing_for_either() -> None:
     """
     from bench import measure
 
-    from smoothjog.core.jogger import ContinuousIntent, StopIntent
+    from smoothjog.core.intents import ContinuousIntent, StopIntent
     from smoothjog.core.ledger import ENGINE
     from smoothjog.virtual import VirtualHost
 

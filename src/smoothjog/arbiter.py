@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from smoothjog.core.errors import InputRefused, JogBuildError
-from smoothjog.core.jogger import ContinuousIntent, Intent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, LeaseExpired, kind_noun
 
 log = logging.getLogger(__name__)

@@ -20,21 +20,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
+from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.core.jogger import (
-    ContinuousIntent,
     EngineEvent,
     EngineLimits,
     EngineView,
-    Intent,
     Jogger,
     JogTuning,
     Output,
     SendLine,
-    StopIntent,
 )
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger
 from smoothjog.core.machine import KeepOut, MachineModel
@@ -339,10 +337,16 @@ class Host:
         self.ledger.capacity_bytes = self.model.rx_buffer_bytes
 
     async def _reader(self) -> None:
-        try:
+        with self._stops_the_host():
             while True:
                 raw = await self.link.read_line()
                 self._on_line(raw, self.now_s())
+
+    @contextlib.contextmanager
+    def _stops_the_host(self) -> Iterator[None]:
+        """Around a task's body: a lost link or a bug ends the host in words, never silently."""
+        try:
+            yield
         except LinkError as exc:
             self.link_error = exc
             logger.error("%s", exc)
@@ -440,7 +444,7 @@ class Host:
         loop = self._running_loop()
         assert self._wake is not None
         assert self._write_lock is not None
-        try:
+        with self._stops_the_host():
             while self.link_error is None:
                 # Cleared before polling: a wake-up set while the outputs are written is kept.
                 self._wake.clear()
@@ -464,12 +468,6 @@ class Host:
                     await self._wake.wait()
                 finally:
                     timer.cancel()
-        except LinkError as exc:
-            self.link_error = exc
-            logger.error("%s", exc)
-            self._ended()
-        except Exception as exc:  # a bug must stop the machine, not vanish quietly
-            self._fail(exc)
 
     def _flush_events(self) -> None:
         engine = self.engine

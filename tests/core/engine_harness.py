@@ -13,15 +13,8 @@ import re
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from smoothjog.core.jogger import (
-    EngineLimits,
-    Intent,
-    Jogger,
-    JogTuning,
-    Output,
-    SendLine,
-    SendRealtime,
-)
+from smoothjog.core.intents import Intent
+from smoothjog.core.jogger import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.ledger import ENGINE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, parse_response

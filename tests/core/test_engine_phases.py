@@ -19,18 +19,8 @@ import pytest
 from smoothjog.core import increments as inc
 from smoothjog.core.errors import JogBuildError
 from smoothjog.core.gcode import TravelBox
-from smoothjog.core.jogger import (
-    ContinuousIntent,
-    EngineLimits,
-    GotoIntent,
-    Intent,
-    JogTuning,
-    Output,
-    Phase,
-    SendLine,
-    StepIntent,
-    StopIntent,
-)
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
+from smoothjog.core.jogger import EngineLimits, JogTuning, Output, Phase, SendLine
 from smoothjog.core.ledger import ENGINE, Entry
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from smoothjog.core.errors import SmoothjogError
-from smoothjog.core.jogger import ContinuousIntent, GotoIntent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent, StopIntent
 from smoothjog.inputs.replay import ReplayError, TimedIntent, load_replay, parse_replay
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "square.jsonl"
@@ -153,11 +153,11 @@ GOOD = '{"t": 0, "stop": true}'
         (['{"t": 0, "axes": {}}'], 1, "'axes' must be an object"),
         (['{"t": 0, "axes": [1, 0]}'], 1, "'axes' must be an object"),
         # steps
-        (['{"t": 0, "step": {"x": 0.0005}}'], 1, "must be 0.001 to 100.0 mm"),
-        (['{"t": 0, "step": {"x": -0.0009}}'], 1, "must be 0.001 to 100.0 mm"),
-        (['{"t": 0, "step": {"x": 0}}'], 1, "must be 0.001 to 100.0 mm"),
-        (['{"t": 0, "step": {"z": 100.5}}'], 1, "step Z=100.5 mm must be 0.001 to 100.0 mm"),
-        (['{"t": 0, "step": {"z": -101}}'], 1, "must be 0.001 to 100.0 mm"),
+        (['{"t": 0, "step": {"x": 0.0005}}'], 1, "is outside 0.001 to 100.0 mm"),
+        (['{"t": 0, "step": {"x": -0.0009}}'], 1, "is outside 0.001 to 100.0 mm"),
+        (['{"t": 0, "step": {"x": 0}}'], 1, "is outside 0.001 to 100.0 mm"),
+        (['{"t": 0, "step": {"z": 100.5}}'], 1, "step of 100.5 mm is outside 0.001 to 100.0 mm"),
+        (['{"t": 0, "step": {"z": -101}}'], 1, "is outside 0.001 to 100.0 mm"),
         (['{"t": 0, "step": {"x": Infinity}}'], 1, "'step.x' must be a finite number"),
         (['{"t": 0, "step": 1}'], 1, "'step' must be an object"),
         # goto

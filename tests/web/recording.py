@@ -11,7 +11,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from smoothjog.core.jogger import ContinuousIntent, GotoIntent, Intent, StepIntent
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent
 
 AXES = ("X", "Y", "Z")
 

@@ -14,7 +14,7 @@ import pytest
 import pytest_asyncio
 
 from smoothjog.core.errors import JogBuildError
-from smoothjog.core.jogger import ContinuousIntent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle
 from smoothjog.web.protocol import PendantError
 from smoothjog.web.server import STATIC_DIR, STEP_SPEED, format_banner, run_pendant

@@ -20,7 +20,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Final, Protocol
 
-from smoothjog.core.jogger import Intent
+from smoothjog.core.intents import Intent
 
 log = logging.getLogger(__name__)
 

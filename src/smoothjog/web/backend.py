@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Protocol, runtime_checkable
 
-from smoothjog.core.jogger import Intent
+from smoothjog.core.intents import Intent
 
 #: The keys of the snapshot `PendantBackend.view()` returns; docs/pendant.md explains each one.
 VIEW_KEYS: frozenset[str] = frozenset(

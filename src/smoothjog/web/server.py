@@ -32,7 +32,7 @@ from aiohttp import WSMsgType, web
 from smoothjog.arbiter import Arbiter
 from smoothjog.config import DEFAULT_HTTP_PORT
 from smoothjog.core.errors import InputRefused
-from smoothjog.core.jogger import ContinuousIntent, Intent, StepIntent, StopIntent
+from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, Notice
 from smoothjog.web.backend import PendantBackend
 from smoothjog.web.protocol import (

@@ -10,7 +10,7 @@ import math
 from collections.abc import Mapping
 
 from smoothjog.core.codes import describe_alarm
-from smoothjog.core.jogger import Intent
+from smoothjog.core.intents import Intent
 from smoothjog.host import Host
 
 #: Why nothing may jog once the link is gone (the view's reason says the same).
