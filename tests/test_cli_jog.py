@@ -265,6 +265,94 @@ def test_an_unknown_machine_is_one_sentence(tmp_path: Path) -> None:
     assert "no-such-machine" in lines[0]
 
 
+# A keep-out written as docs/config.md shows it, but with X and Y only: it blocks every Z height
+# above that area of hobby-router (which powers up homed at MPos -1,-1,-1).
+XY_KEEPOUT = """\
+[[keepout]]
+name = "vise"
+min_mm = [-50, -60]
+max_mm = [20, -30]
+"""
+
+
+def inside_xy_keepout(mpos: tuple[float, ...]) -> bool:
+    """True when a position lies in the open interior of XY_KEEPOUT (any Z)."""
+    return -50.0 < mpos[0] < 20.0 and -60.0 < mpos[1] < -30.0
+
+
+@pytest.mark.parametrize("z_mm", [None, -60.0], ids=["at-the-top", "lower-down"])
+def test_a_keepout_with_only_x_and_y_stops_the_stick_at_its_face(
+    tmp_path: Path, z_mm: float | None
+) -> None:
+    """The stick pushed along -Y into an X/Y-only zone stops at its face, at any Z, and ends
+    Idle: no traceback, no fault, and the machine never entered the zone."""
+    config = tmp_path / "xy.toml"
+    config.write_text(XY_KEEPOUT, encoding="utf-8")
+    lines = []
+    if z_mm is not None:  # first go down, clear of the zone, then push into it there
+        lines.append(f'{{"t": 0, "goto": {{"z": {z_mm}}}, "speed": 1}}')
+    t0_s = 0.0 if z_mm is None else 4.0
+    lines += [
+        f'{{"t": {t0_s}, "axes": {{"y": -1}}, "speed": 0.5}}',  # 41.7 mm/s for 1.5 s: ~62 mm
+        f'{{"t": {t0_s + 1.5}, "axes": {{"y": 0}}}}',
+    ]
+    script = write_replay(tmp_path / "into-the-vise.jsonl", *lines)
+    result = run_jog("--replay", str(script), "--config", str(config))
+    assert "Traceback" not in result.stderr
+    summary = assert_clean_success(result)
+    x_mm, y_mm, z_end_mm = summary.final_mpos
+    assert x_mm == pytest.approx(-1.0, abs=1e-3)
+    assert z_end_mm == pytest.approx(-1.0 if z_mm is None else z_mm, abs=1e-3)
+    # Stopped just outside the face y = -30 (the engine keeps one 1/80 mm step clear of it):
+    # blocked there at this Z although the zone names no Z at all.
+    assert -30.0 < y_mm < -29.95
+    assert not inside_xy_keepout(summary.final_mpos)
+    # Ground truth: the simulator's path is exactly as long as the straight legs (down Z, if
+    # asked, then -Y to the face), so the machine took no detour: it was never inside the zone.
+    assert summary.distance_mm is not None
+    corner = (-1.0, -1.0, z_end_mm)
+    legs_mm = math.dist((-1.0, -1.0, -1.0), corner) + math.dist(corner, summary.final_mpos)
+    assert summary.distance_mm == pytest.approx(legs_mm, abs=0.01)
+
+
+def test_the_example_square_with_an_xy_keepout_from_the_docs(tmp_path: Path) -> None:
+    """The reported crash: docs/config.md's vise with only X and Y, the shipped example replay.
+    The run ends with a summary (no traceback); the machine is never left inside the zone."""
+    config = tmp_path / "docs-vise.toml"
+    config.write_text(
+        '[[keepout]]\nname = "vise"\nmin_mm = [-120, -80]\nmax_mm = [-40, -20]\n',
+        encoding="utf-8",
+    )
+    result = run_jog("--replay", str(EXAMPLE), "--config", str(config))
+    assert "Traceback" not in result.stdout + result.stderr
+    summary = parse_summary(result.stdout)
+    assert summary.final_state == "Idle"
+    x_mm, y_mm, _ = summary.final_mpos
+    assert not (-120.0 < x_mm < -40.0 and -80.0 < y_mm < -20.0)
+    # The only thing allowed to go wrong is the go-to being refused because it crosses the zone
+    # (reported in the summary and logged on stderr).
+    assert all("keep-out zone 'vise'" in fault for fault in summary.faults), summary.faults
+    assert all("keep-out zone 'vise'" in line for line in result.stderr.splitlines())
+
+
+def test_a_keepout_naming_an_axis_the_machine_lacks_is_one_sentence(tmp_path: Path) -> None:
+    """Four numbers on a 3-axis machine: refused at start-up naming the file and the key."""
+    config = tmp_path / "four.toml"
+    config.write_text(
+        '[[keepout]]\nname = "rotary"\nmin_mm = [0, 0, 0, 0]\nmax_mm = [1, 1, 1, 90]\n',
+        encoding="utf-8",
+    )
+    script = write_replay(tmp_path / "ok.jsonl", '{"t": 0, "stop": true}')
+    result = run_jog("--replay", str(script), "--config", str(config))
+    assert result.returncode != 0
+    assert result.stdout == ""
+    assert "Traceback" not in result.stderr
+    (sentence,) = result.stderr.splitlines()
+    assert sentence.startswith(f"smoothjog: {config}: [keepout 'rotary'] min_mm"), sentence
+    assert "3 axes (X Y Z)" in sentence
+    assert "no axis A" in sentence
+
+
 # ------------------------------------------------------------------------ real time
 
 SHORT_SCRIPT = (

@@ -18,7 +18,8 @@ from smoothjog.config import (
     parse_config,
 )
 from smoothjog.core.errors import ConfigError
-from smoothjog.core.machine import KeepOut
+from smoothjog.core.machine import KeepOut, MachineModel
+from smoothjog.core.responses import parse_response
 
 FULL = """
 [connection]
@@ -217,3 +218,41 @@ def test_config_is_frozen() -> None:
         config.connection.baud = 9600  # type: ignore[misc]
     with pytest.raises(TypeError):
         config.jog.speed_ratios["X"] = 0.5  # type: ignore[index]
+
+
+def test_a_keepout_remembers_where_it_was_written(tmp_path: Path) -> None:
+    """Each zone carries its file and section, for messages only: equality ignores it."""
+    path = write(tmp_path, FULL)
+    vise, dock = load_config(path, environ={}).keepouts
+    assert (vise.source, dock.source) == (str(path), str(path))
+    assert dock.where == f"{path}: [keepout 'probe dock']"
+    assert dock == KeepOut("probe dock", (-5.5, -300.0), (0.0, -280.0))
+
+
+@pytest.mark.parametrize(
+    ("min_mm", "max_mm", "accepted"),
+    [
+        ("[-120, -80]", "[-40, -20]", True),  # X and Y only: every Z height is blocked
+        ("[-120]", "[-40]", True),
+        ("[-120, -80, -60]", "[-40, -20, 0]", True),
+        ("[-120, -80, -60, 0]", "[-40, -20, 0, 90]", False),  # an A the machine lacks
+    ],
+)
+def test_keepout_axes_are_checked_against_the_machine_at_start_up(
+    tmp_path: Path, min_mm: str, max_mm: str, accepted: bool
+) -> None:
+    """A zone may name fewer axes than the machine; one it lacks is refused naming file and key."""
+    path = write(tmp_path, f"[[keepout]]\nname = 'vise'\nmin_mm = {min_mm}\nmax_mm = {max_mm}\n")
+    zones = load_config(path, environ={}).keepouts
+    model = MachineModel()
+    model.apply(parse_response("<Idle|MPos:0.000,0.000,0.000|FS:0,0>"))
+    if accepted:
+        model.set_keep_outs(zones)
+        assert model.keep_outs == zones
+        return
+    with pytest.raises(ConfigError) as info:
+        model.set_keep_outs(zones)
+    message = str(info.value)
+    assert message.startswith(f"{path}: [keepout 'vise'] min_mm")
+    assert "4 numbers" in message
+    assert "3 axes (X Y Z)" in message

@@ -283,7 +283,9 @@ def _keepouts(value: Any, source: str) -> tuple[KeepOut, ...]:
                     "min_mm", f"on axis {axis} ({lo:g}) is not below max_mm ({hi:g}): swap them"
                 )
         table.finish()
-        zones.append(KeepOut(name, min_mm, max_mm))
+        # Whether the machine has every axis the zone names is known only after the connect
+        # handshake; MachineModel.set_keep_outs checks it then, naming this file and the key.
+        zones.append(KeepOut(name, min_mm, max_mm, source=source))
     return tuple(zones)
 
 

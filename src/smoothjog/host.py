@@ -158,12 +158,13 @@ class Host:
         self._tasks.append(asyncio.create_task(self._reader(), name="smoothjog-reader"))
         try:
             await self._handshake()
+            if jog:
+                self.model.set_keep_outs(self.keepouts)  # refuses a zone in words
+                self.driver = self._make_engine()
         except BaseException:
             await self._cancel_tasks()
             raise
         if jog:
-            self.model.set_keep_outs(self.keepouts)
-            self.driver = self._make_engine()
             self._tasks.append(asyncio.create_task(self._ticker(), name="smoothjog-ticker"))
         return self.model
 

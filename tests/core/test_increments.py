@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from smoothjog.core import increments as inc
 
@@ -108,3 +111,99 @@ def test_ray_box_entry_cases(
     t, face = inc.ray_box_entry(start, unit_vec, (3.0, -1.0), (4.0, 1.0))
     assert t == pytest.approx(expected[0])
     assert face == expected[1]
+
+
+INF = math.inf
+# A keep-out naming X and Y only on a 3-axis machine, as the jog engine hands it over: bounds
+# shorter than the ray, or (the same zone written out) infinite along Z.
+XY_LO, XY_HI = (3.0, -1.0), (4.0, 1.0)
+XY_LO_INF, XY_HI_INF = (3.0, -1.0, -INF), (4.0, 1.0, INF)
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi"), [(XY_LO, XY_HI), (XY_LO_INF, XY_HI_INF)], ids=["short", "inf"]
+)
+@pytest.mark.parametrize(
+    ("start", "unit_vec", "expected"),
+    [
+        pytest.param((0.0, 0.0, 50.0), (1.0, 0.0, 0.0), (3.0, 0), id="level-at-any-height"),
+        pytest.param((0.0, 0.0, -9e9), (0.6, 0.0, 0.8), (5.0, 0), id="climbing-into-the-side"),
+        pytest.param((3.5, -3.0, 7.0), (0.0, 1.0, 0.0), (2.0, 1), id="through-the-bottom"),
+        pytest.param((0.0, 5.0, 0.0), (1.0, 0.0, 0.0), (INF, None), id="passes-beside"),
+        pytest.param((3.5, 0.0, 10.0), (0.0, 0.0, -1.0), (INF, None), id="inside-going-down"),
+        pytest.param((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (INF, None), id="beside-going-up"),
+        pytest.param((3.0, 0.0, 0.0), (0.0, 0.0, 1.0), (INF, None), id="on-a-face-going-up"),
+    ],
+)
+def test_ray_box_entry_with_axes_the_zone_leaves_out(
+    lo: tuple[float, ...],
+    hi: tuple[float, ...],
+    start: tuple[float, ...],
+    unit_vec: tuple[float, ...],
+    expected: tuple[float, int | None],
+) -> None:
+    """An axis the zone does not name is unbounded: the zone blocks every height of its X/Y area."""
+    t, face = inc.ray_box_entry(start, unit_vec, lo, hi)
+    assert not math.isnan(t)
+    assert t == pytest.approx(expected[0])
+    assert face == expected[1]
+
+
+@pytest.mark.parametrize(
+    ("start", "unit_vec", "lo", "hi", "expected"),
+    [
+        pytest.param((0.0, 0.0), (0.0, 1.0), (-INF, -INF), (INF, INF), (INF, None), id="no-bounds"),
+        pytest.param((0.0, 0.0), (1.0, 0.0), (-INF, -5.0), (INF, 5.0), (INF, None), id="open-x"),
+        pytest.param((0.0, 0.0), (0.6, -0.8), (-INF, -4.0), (INF, 4.0), (5.0, 1), id="to-a-face"),
+        pytest.param((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), (-1.0,), (1.0,), (INF, None), id="short"),
+        pytest.param((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (-1.0, -1.0), (1.0, 1.0), (INF, None),
+                     id="short-along-the-free-axis"),
+        pytest.param((0.0, 0.0, 0.0), (0.0, 0.6, 0.8), (-1.0, -3.0), (1.0, 3.0), (5.0, 1),
+                     id="short-to-a-face"),
+    ],
+)  # fmt: skip
+def test_ray_box_exit_with_infinite_or_missing_bounds(
+    start: tuple[float, ...],
+    unit_vec: tuple[float, ...],
+    lo: tuple[float, ...],
+    hi: tuple[float, ...],
+    expected: tuple[float, int | None],
+) -> None:
+    """No face in the way gives (inf, None), never NaN; missing axes are unbounded."""
+    t, axis = inc.ray_box_exit(start, unit_vec, lo, hi)
+    assert not math.isnan(t)
+    assert t == pytest.approx(expected[0])
+    assert axis == expected[1]
+
+
+@pytest.mark.parametrize("function", [inc.ray_box_entry, inc.ray_box_exit])
+def test_ray_boxes_refuse_bounds_for_axes_the_ray_lacks(function: Callable[..., object]) -> None:
+    """A box with more axes than the position is a caller's mistake, said in words."""
+    with pytest.raises(ValueError, match=r"3 axes .* 2"):
+        function((0.0, 0.0), (1.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+
+
+_COORD = st.one_of(
+    st.floats(min_value=-1e6, max_value=1e6, allow_nan=False), st.sampled_from([0.0, -0.0])
+)
+_BOUND = st.one_of(_COORD, st.sampled_from([INF, -INF]))
+
+
+@given(
+    st.lists(st.tuples(_COORD, st.sampled_from([-1.0, -0.5, 0.0, 0.5, 1.0]), _BOUND, _BOUND),
+             min_size=1, max_size=6),
+    st.integers(min_value=0, max_value=6),
+)  # fmt: skip
+def test_ray_boxes_never_give_nan_or_divide_by_zero(
+    axes: list[tuple[float, float, float, float]], named: int
+) -> None:
+    """Any finite position, any direction with zero components, any ±inf bounds: a number."""
+    start = tuple(a[0] for a in axes)
+    direction = tuple(a[1] for a in axes)
+    lo = tuple(min(a[2], a[3]) for a in axes)[:named]
+    hi = tuple(max(a[2], a[3]) for a in axes)[:named]
+    for function in (inc.ray_box_entry, inc.ray_box_exit):
+        t, axis = function(start, direction, lo, hi)
+        assert not math.isnan(t)
+        assert t >= 0.0
+        assert axis is None or 0 <= axis < len(lo)

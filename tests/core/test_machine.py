@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from smoothjog.core.errors import CoreError
+from smoothjog.core.errors import ConfigError, CoreError
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.machine import KeepOut, MachineModel, Settings
 from smoothjog.core.responses import parse_response
@@ -121,7 +121,7 @@ def test_settings_from_raw_skips_non_numbers() -> None:
     ("firmware_banner", "opt", "blocks", "usable", "rx"),
     [
         ("Grbl 1.1h ['$' for help]", None, 15, 15, 128),
-        ("GrblHAL 1.1f ['$' or '$HELP' for help]", None, 100, 100, 1024),
+        ("GrblHAL 1.1f ['$' or '$HELP' for help]", None, 15, 15, 1024),
         ("Grbl 3.7 [FluidNC v3.7.8 (esp32-wifi) '$' for help]", None, 16, 15, 256),
         ("Grbl 1.1h ['$' for help]", "[OPT:V,15,128]", 15, 15, 128),
         ("GrblHAL 1.1f ['$' or '$HELP' for help]", "[OPT:VNMSL,35,1024,3,0]", 35, 35, 1024),
@@ -131,8 +131,8 @@ def test_settings_from_raw_skips_non_numbers() -> None:
 def test_planner_and_rx_sizes(
     firmware_banner: str, opt: str | None, blocks: int, usable: int, rx: int
 ) -> None:
-    """[OPT:] wins; otherwise per-firmware defaults; FluidNC can fill blocks - 1 (firmware-facts
-    §7)."""
+    """[OPT:] wins; unknown, the smallest usable planner of any family (15) is assumed; FluidNC
+    can fill blocks - 1 (firmware-facts §7)."""
     model = feed(MachineModel(), "", firmware_banner, *([opt] if opt else []))
     assert (model.planner_blocks, model.planner_usable_blocks, model.rx_buffer_bytes) == (
         blocks,
@@ -146,6 +146,81 @@ def test_larger_bf_seen_raises_usable_blocks() -> None:
     model = feed(MachineModel(), "<Idle|MPos:0.000,0.000,0.000|Bf:20,128>")
     assert model.planner_usable_blocks == 20
     assert model.buffer == (20, 128)
+
+
+GRBLHAL_BANNER = "GrblHAL 1.1f ['$' or '$HELP' for help]"
+
+
+@pytest.mark.parametrize(
+    ("opt", "blocks"),
+    [
+        ("[OPT:VNMSL+*$#W2,35,1024,3,0]", 35),
+        ("[OPT:VNMZHL+,35,1024,3,0]", 35),
+        ("[OPT:V0S2,50,1024,5,0]", 50),
+    ],
+)
+def test_planner_size_comes_from_opt_whatever_the_letters(opt: str, blocks: int) -> None:
+    """A grblHAL `[OPT:]` with `+ * $ #` or digits still sets the planner size (not 100)."""
+    model = feed(MachineModel(), "", GRBLHAL_BANNER, "[VER:1.1f.20240101:]", opt)
+    assert (model.planner_blocks, model.planner_usable_blocks) == (blocks, blocks)
+
+
+@pytest.mark.parametrize(
+    "banner",
+    [
+        None,
+        "Grbl 1.1h ['$' for help]",
+        GRBLHAL_BANNER,
+        "Grbl 3.7 [FluidNC v3.7.8 (x) '$' for help]",
+    ],
+)
+def test_unknown_planner_size_assumes_the_smallest(banner: str | None) -> None:
+    """No `[OPT:]` size and no Bf: the smallest usable planner of the table, never the largest."""
+    model = feed(MachineModel(), *(["", banner] if banner else []), "[OPT:MPHABSREW]")
+    assert model.planner_usable_blocks == 15
+
+
+@pytest.mark.parametrize(
+    ("reports", "usable"),
+    [
+        # Idle with an empty planner shows every usable block: it lowers [OPT:]'s 35 ...
+        (["<Idle|MPos:0,0,0|Bf:34,1024>"], 34),
+        # ... and raises it.
+        (["<Idle|MPos:0,0,0|Bf:40,1024>"], 40),
+        # The largest Idle value wins: a momentary lower one does not undo it.
+        (["<Idle|MPos:0,0,0|Bf:34,1024>", "<Idle|MPos:0,0,0|Bf:30,1024>"], 34),
+        (["<Idle|MPos:0,0,0|Bf:30,1024>", "<Idle|MPos:0,0,0|Bf:34,1024>"], 34),
+        # Outside Idle the planner may hold blocks: such a Bf says nothing about its size.
+        (["<Jog|MPos:0,0,0|Bf:10,1024>", "<Hold:0|MPos:0,0,0|Bf:2,1024>"], 35),
+        (["<Run|MPos:0,0,0|Bf:36,1024>"], 35),
+    ],
+)
+def test_idle_bf_sets_the_usable_blocks(reports: list[str], usable: int) -> None:
+    """The largest Bf free-block count seen in Idle is the usable planner (firmware-facts §4.4)."""
+    model = feed(MachineModel(), "", GRBLHAL_BANNER, "[OPT:VNMSL+,35,1024,3,0]", *reports)
+    assert model.planner_usable_blocks == usable
+
+
+def test_a_reboot_forgets_the_idle_bf() -> None:
+    """After a banner the planner may have been resized ($398 takes effect on reboot, §7)."""
+    model = feed(MachineModel(), "", GRBLHAL_BANNER, "[OPT:VNMSL,35,1024]", "ok")
+    feed(model, "<Idle|MPos:0,0,0|Bf:40,1024>")
+    assert model.planner_usable_blocks == 40
+    feed(model, "", GRBLHAL_BANNER)
+    assert model.planner_usable_blocks == 35
+    feed(model, "<Idle|MPos:0,0,0|Bf:30,1024>")
+    assert model.planner_usable_blocks == 30
+
+
+@pytest.mark.parametrize("opt", ["[OPT:VZL+,15,128]", "[OPT:VNMZL+*$#W2,35,1024,3,0]"])
+def test_force_origin_with_punctuation_letters(opt: str) -> None:
+    """`Z` among `+ * $ #`: the envelope is 0..+travel on $23 axes and a homed machine at MPos 0
+    is not taken for an unhomed one (firmware-facts §2)."""
+    model = soft_limited("$23=7", "$130=200", "$131=300", "$132=100", opt)
+    assert model.homing_force_set_origin
+    assert model.soft_limit_envelope() == TravelBox((0.0, 0.0, 0.0), (200.0, 300.0, 100.0))
+    feed(model, "<Idle|MPos:0.000,0.000,0.000|FS:0,0>")
+    assert not model.looks_unhomed()
 
 
 def test_firmware_version_and_options_from_banner_and_i() -> None:
@@ -411,6 +486,65 @@ def test_bad_boxes_are_refused(
     """Inside-out or mismatched corners raise CoreError naming the zone and the fix."""
     with pytest.raises(CoreError, match=message_part):
         KeepOut("clamp", low, high)
+
+
+INF = float("inf")
+# A vise given in X and Y only: it blocks every Z height above that area.
+XY_VISE = KeepOut("vise", (-50.0, -50.0), (-10.0, -10.0))
+
+
+@pytest.mark.parametrize(
+    ("start", "end", "crosses"),
+    [
+        ((0.0, -30.0, -50.0), (-100.0, -30.0, -50.0), True),  # straight through
+        ((0.0, -30.0, 0.0), (-100.0, -30.0, 0.0), True),  # at the very top of Z: still blocked
+        ((0.0, -30.0, -5e5), (-100.0, -30.0, -5e5), True),  # and far below
+        ((-30.0, -30.0, 0.0), (-30.0, -30.0, -80.0), True),  # down Z inside the area
+        ((0.0, 0.0, 0.0), (0.0, 0.0, -80.0), False),  # down Z beside it
+        ((0.0, 0.0, -50.0), (-5.0, -5.0, -50.0), False),  # stops short
+        ((-5.0, 0.0, -50.0), (-5.0, -100.0, -50.0), False),  # passes beside in X
+    ],
+)
+def test_a_zone_with_fewer_axes_is_unbounded_along_the_others(
+    start: tuple[float, ...], end: tuple[float, ...], crosses: bool
+) -> None:
+    """Axes the zone leaves out do not limit it (docs/config.md): contains and crosses agree."""
+    assert XY_VISE.crosses(start, end) is crosses
+    assert XY_VISE.contains((-30.0, -30.0, 123.0))
+    assert not XY_VISE.contains((0.0, -30.0, -50.0))
+
+
+@pytest.mark.parametrize(
+    ("zone", "start", "end", "crosses"),
+    [
+        (KeepOut("slab", (-INF, -1.0), (INF, 1.0)), (5.0, -5.0), (5.0, 5.0), True),
+        (KeepOut("slab", (-INF, -1.0), (INF, 1.0)), (5.0, 5.0), (-5.0, 5.0), False),
+        (KeepOut("all", (-INF, -INF), (INF, INF)), (5.0, 5.0), (5.0, 5.0), True),
+        (KeepOut("half", (0.0, -INF), (INF, INF)), (-1.0, 3.0), (-1.0, 9.0), False),
+        (KeepOut("half", (0.0, -INF), (INF, INF)), (-1.0, 3.0), (1.0, 3.0), True),
+    ],
+)
+def test_crosses_with_infinite_bounds_and_zero_components(
+    zone: KeepOut, start: tuple[float, ...], end: tuple[float, ...], crosses: bool
+) -> None:
+    """±inf bounds and moves that do not change an axis give a plain answer, never NaN."""
+    assert zone.crosses(start, end) is crosses
+
+
+def test_set_keep_outs_checks_the_axes_against_the_machine() -> None:
+    """Fewer axes than the machine are fine; an axis it lacks is refused, naming where and why."""
+    model = feed(MachineModel(), "<Idle|MPos:0.000,0.000,0.000|FS:0,0>")
+    model.set_keep_outs([XY_VISE])
+    assert model.keep_outs == (XY_VISE,)
+    four = KeepOut("rotary", (0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0), source="mill.toml")
+    with pytest.raises(ConfigError, match=r"^mill\.toml: \[keepout 'rotary'\] min_mm") as info:
+        model.set_keep_outs([XY_VISE, four])
+    assert "axis A" in str(info.value)
+    assert "X Y Z" in str(info.value)
+    assert model.keep_outs == (XY_VISE,)  # unchanged by the refusal
+    feed(model, "<Idle|MPos:0.000,0.000,0.000,0.000|FS:0,0>")
+    model.set_keep_outs([four])
+    assert model.keep_outs == (four,)
 
 
 def test_axis_letters_setter() -> None:

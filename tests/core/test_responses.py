@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from smoothjog.core.responses import (
+    OPTION_CODES,
     AlarmReply,
     Banner,
     BuildOptions,
@@ -157,6 +158,44 @@ def test_ngc_parameters(line: str, expected: Parameter) -> None:
 def test_build_info(line: str, expected: Response) -> None:
     """`$I` lines: version, build date, user string, option letters, planner and RX sizes."""
     assert parse_response(line) == expected
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [
+        # Grbl 1.1h with a door pin and the EEPROM restore commands compiled out (report.c
+        # report_build_info: `+` for ENABLE_SAFETY_DOOR_INPUT_PIN, `*`, `$`, `#` when disabled).
+        ("[OPT:VZL+*$#,15,128]", BuildOptions("VZL+*$#", 15, 128, ())),
+        # Every letter Grbl 1.1h can print, in its order, digits `0` and `2` included.
+        ("[OPT:VNMCPZHTAD0SRL+*$#IEW2,15,128]",
+         BuildOptions("VNMCPZHTAD0SRL+*$#IEW2", 15, 128, ())),
+        # grblHAL: a 35-block planner behind punctuation, then N_AXIS and N_TOOLS.
+        ("[OPT:VNMSL+*$#W2,35,1024,3,0]", BuildOptions("VNMSL+*$#W2", 35, 1024, ("3", "0"))),
+        # FluidNC prints letters only, no sizes.
+        ("[OPT:MPHABSREW]", BuildOptions("MPHABSREW", None, None, ())),
+        # A letter nobody documents yet still leaves the sizes readable.
+        ("[OPT:V%,35,1024]", BuildOptions("V%", 35, 1024, ())),
+        ("[OPT:,15,128]", BuildOptions("", 15, 128, ())),
+    ],
+)  # fmt: skip
+def test_option_punctuation_is_kept_and_the_sizes_still_read(
+    line: str, expected: BuildOptions
+) -> None:
+    """`+ * $ #` and digits are option letters too; they never cost the planner size."""
+    assert parse_response(line) == expected
+
+
+def test_every_documented_option_letter_parses() -> None:
+    """One `[OPT:]` holding every letter of the table parses with the sizes intact."""
+    codes = "".join(OPTION_CODES)
+    assert set("+*$#02") <= set(codes)
+    assert parse_response(f"[OPT:{codes},35,1024]") == BuildOptions(codes, 35, 1024, ())
+
+
+@pytest.mark.parametrize("codes", ["V N", "V\u00e9", "V\u2603Z"])
+def test_option_letters_that_no_firmware_prints_are_noise(codes: str) -> None:
+    """Spaces or non-ASCII in the letters are line noise: Unparsed, never a guessed size."""
+    assert isinstance(parse_response(f"[OPT:{codes},15,128]"), Unparsed)
 
 
 def test_gcode_modes() -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from decimal import ROUND_HALF_UP, Decimal
 
 from smoothjog.core.units import Vec, limit_by_axis_maximum, mm_min_to_mm_s, norm, unit
 
@@ -51,6 +52,16 @@ def vector_move(
 def stop_distance_mm(speed_mm_s: float, accel_mm_s2: float) -> float:
     """Distance to brake from speed to rest: v²/(2a)."""
     return speed_mm_s * speed_mm_s / (2.0 * accel_mm_s2)
+
+
+def nearest_step_mm(target_mm: Decimal, steps_per_mm: float) -> float:
+    """The step nearest an exact target (machine mm), ties away from zero as Grbl's lround.
+
+    Grbl rounds every absolute target to whole steps (firmware-facts §1.5), so a target chosen
+    on that grid is where the machine ends, however its line's 4 decimals round the distance.
+    """
+    steps = (target_mm * Decimal(steps_per_mm)).to_integral_value(rounding=ROUND_HALF_UP)
+    return float(steps) / steps_per_mm
 
 
 def min_block_mm(speed_mm_s: float, accel_mm_s2: float, planner_blocks: int) -> float:
@@ -162,16 +173,33 @@ def cancel_restart_s(
     )
 
 
+def _box_over(n_axes: int, lo_mm: Sequence[float], hi_mm: Sequence[float]) -> tuple[Vec, Vec]:
+    """A box's corners over n_axes: axes it does not name (the last ones) are unbounded."""
+    if len(lo_mm) != len(hi_mm):
+        raise ValueError(f"box corners have {len(lo_mm)} and {len(hi_mm)} axes; give both alike")
+    if len(lo_mm) > n_axes:
+        raise ValueError(f"a box with {len(lo_mm)} axes cannot bound a ray of {n_axes} axes")
+    free = n_axes - len(lo_mm)
+    return tuple(lo_mm) + (-math.inf,) * free, tuple(hi_mm) + (math.inf,) * free
+
+
 def ray_box_exit(
     start_mm: Sequence[float],
     unit_vec: Sequence[float],
     lo_mm: Sequence[float],
     hi_mm: Sequence[float],
 ) -> tuple[float, int | None]:
-    """How far a ray from inside a box can go before leaving it, and the axis that stops it."""
+    """How far a ray from inside a box can go before leaving it, and the axis that stops it.
+
+    The box may name fewer axes than the ray (the rest are unbounded) and have infinite bounds;
+    no face in the way gives (inf, None). Positions must be finite.
+    """
     best = math.inf
     axis: int | None = None
-    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_mm, hi_mm, strict=True)):
+    lo_all, hi_all = _box_over(len(start_mm), lo_mm, hi_mm)
+    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_all, hi_all, strict=True)):
+        # Zero components are skipped (no division by zero); an infinite bound gives t = ±inf,
+        # never NaN, since p is finite.
         if u > 0.0:
             t = (hi - p) / u
         elif u < 0.0:
@@ -191,12 +219,15 @@ def ray_box_entry(
 ) -> tuple[float, int | None]:
     """Where a ray from outside enters a box's open interior (inf if never), and the face axis.
 
-    Slab method; touching a face or running along it is not entering.
+    Slab method; touching a face or running along it is not entering. As for ray_box_exit, axes
+    the box does not name are unbounded (a keep-out given in X and Y blocks every Z) and bounds
+    may be infinite: an unbounded slab is entered at t = -inf, so it never names the face.
     """
     t_enter = -math.inf
     t_exit = math.inf
     face: int | None = None
-    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_mm, hi_mm, strict=True)):
+    lo_all, hi_all = _box_over(len(start_mm), lo_mm, hi_mm)
+    for i, (p, u, lo, hi) in enumerate(zip(start_mm, unit_vec, lo_all, hi_all, strict=True)):
         if u == 0.0:
             if not lo < p < hi:
                 return math.inf, None

@@ -27,8 +27,9 @@ from smoothjog.core.defaults import (
     MAX_TRAVEL_SETTING,
     STEPS_PER_MM_SETTING,
 )
-from smoothjog.core.errors import CoreError
+from smoothjog.core.errors import ConfigError, CoreError
 from smoothjog.core.firmware import (
+    FIRMWARES,
     FirmwareName,
     for_model,
     named_by_info,
@@ -55,15 +56,26 @@ from smoothjog.core.responses import (
 from smoothjog.core.units import ALL_AXES, Vec, inch_to_mm
 
 _MAX_AXES = len(ALL_AXES)
+#: The planner a host assumes until `[OPT:]` or an Idle `Bf` says otherwise: the smallest any
+#: family ships with (Grbl's 15 usable blocks, firmware-facts §4.1, §7). Assuming too few only
+#: lengthens increments; assuming too many (grblHAL's 100 on a 35-block build) makes them too
+#: short for the stopping distance to fit in the queue (firmware-facts §4.3).
+SMALLEST_USABLE_BLOCKS = min(facts.planner_usable_blocks for facts in FIRMWARES.values())
 
 
 @dataclass(frozen=True, slots=True)
 class KeepOut:
-    """A named box in machine mm that jogs must not enter (a vise, a clamp, a probe dock)."""
+    """A named box in machine mm that jogs must not enter (a vise, a clamp, a probe dock).
+
+    The corners may name fewer axes than the machine has: the zone is then unbounded along the
+    others, so a zone given in X and Y blocks every Z height above that area. Bounds may be
+    infinite. `source` names the config file the zone came from, for messages only.
+    """
 
     name: str
     min_mm: Vec
     max_mm: Vec
+    source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         """Refuse zones whose corners disagree in length or are inside out."""
@@ -81,8 +93,14 @@ class KeepOut:
 
     @property
     def box(self) -> TravelBox:
-        """The zone as a box (both faces inclusive)."""
+        """The zone as a box over the axes it names (both faces inclusive)."""
         return TravelBox(self.min_mm, self.max_mm)
+
+    @property
+    def where(self) -> str:
+        """Where the zone was written, as messages name it: `FILE: [keepout 'vise']`."""
+        section = f"[keepout {self.name!r}]"
+        return f"{self.source}: {section}" if self.source else section
 
     def contains(self, point_mm: Sequence[float]) -> bool:
         """True when the point lies inside or on the zone; axes the zone lacks are free."""
@@ -92,7 +110,8 @@ class KeepOut:
 
     def crosses(self, start_mm: Sequence[float], end_mm: Sequence[float]) -> bool:
         """True when the straight move from start to end touches the zone anywhere."""
-        # Slab test: clip the segment's parameter t in [0, 1] against each axis's slab.
+        # Slab test: clip the segment's parameter t in [0, 1] against each axis's slab. Axes the
+        # zone does not name are left out by zip, which is what "unbounded" means there.
         t_lo, t_hi = 0.0, 1.0
         for lo, hi, a, b in zip(self.min_mm, self.max_mm, start_mm, end_mm, strict=False):
             d = b - a
@@ -100,6 +119,8 @@ class KeepOut:
                 if not lo <= a <= hi:
                     return False
                 continue
+            # An infinite bound gives t = ±inf with the right sign (positions are finite, so no
+            # inf - inf), which the min/max below treat as a face that is never reached.
             t0, t1 = (lo - a) / d, (hi - a) / d
             t_lo, t_hi = max(t_lo, min(t0, t1)), min(t_hi, max(t0, t1))
             if t_lo > t_hi:
@@ -280,7 +301,8 @@ class MachineModel:
     _axis_letters: tuple[str, ...] | None = field(default=None, init=False, repr=False)
     _opt_blocks: int | None = field(default=None, init=False, repr=False)
     _opt_rx_bytes: int | None = field(default=None, init=False, repr=False)
-    _max_planner_free_seen: int = field(default=0, init=False, repr=False)
+    # The largest Bf free-block count of an Idle report since the last banner (None: none yet).
+    _idle_planner_free_max: int | None = field(default=None, init=False, repr=False)
     _report_axes: int | None = field(default=None, init=False, repr=False)
     # Any reply seen: a banner after this is a reset, not the power-up one.
     _talked: bool = field(default=False, init=False, repr=False)
@@ -306,23 +328,30 @@ class MachineModel:
     @property
     def homing_force_set_origin(self) -> bool:
         """Built with HOMING_FORCE_SET_ORIGIN: option letter `Z` in `[OPT:]` (firmware-facts §2)."""
+        # option_codes holds one character per option, punctuation included (`VZL+*$#`), so
+        # this is a test for the letter, never for a substring of some longer word.
         return "Z" in self.option_codes
 
     @property
     def planner_blocks(self) -> int:
-        """Planner size as the firmware states it: [OPT:] when known, else its default."""
+        """Planner size as the firmware states it: [OPT:] when known, else the smallest likely."""
         if self._opt_blocks is not None:
             return self._opt_blocks
-        return for_model(self).planner_blocks
+        # Unknown (no `$I` yet, or an [OPT:] of letters only, as FluidNC prints): never a family's
+        # default such as grblHAL's 100, which a build may have lowered (`$398`, firmware-facts §7).
+        return SMALLEST_USABLE_BLOCKS + for_model(self).planner_blocks_hidden
 
     @property
     def planner_usable_blocks(self) -> int:
-        """Blocks a host can fill: what `Bf` shows when the planner is empty."""
-        # Grbl's [OPT:] already counts usable blocks (15 of a 16-slot ring) and grblHAL uses all
-        # of its blocks; FluidNC's Bf is planner_blocks - 1 (firmware-facts §7), which the table's
-        # hidden blocks say. A larger Bf seen in a report is ground truth and wins.
-        stated = self.planner_blocks - for_model(self).planner_blocks_hidden
-        return max(stated, self._max_planner_free_seen)
+        """Blocks a host can fill: the largest Idle `Bf` seen, else what [OPT:] implies."""
+        # In Idle the planner is empty, so Bf's first value is every block a host can fill
+        # (firmware-facts §4.4; FluidNC's is planner_blocks - 1, §7). That measurement beats the
+        # stated size both ways: a smaller one lowers it, a larger one raises it. Outside Idle
+        # blocks may be queued and Bf only bounds the size from below, so it is not used. The
+        # largest Idle value is kept because a report can catch a line just being planned.
+        if self._idle_planner_free_max is not None:
+            return self._idle_planner_free_max
+        return self.planner_blocks - for_model(self).planner_blocks_hidden
 
     @property
     def rx_buffer_bytes(self) -> int:
@@ -378,7 +407,22 @@ class MachineModel:
     # --- pure setters -----------------------------------------------------------------------
 
     def set_keep_outs(self, zones: Sequence[KeepOut]) -> None:
-        """Replace the keep-out zones (from the config)."""
+        """Replace the keep-out zones (from the config); one naming an axis the machine lacks
+        is refused."""
+        n_axes = self.n_axes
+        for zone in zones:
+            named = len(zone.min_mm)
+            if named > n_axes:
+                # Fewer axes are fine (unbounded along the rest), but a bound on an axis the
+                # machine does not have means the config was written for another machine.
+                extra = " ".join(_letter(i) for i in range(n_axes, named))
+                raise ConfigError(
+                    f"{zone.where} min_mm has {named} numbers"
+                    f" ({' '.join(_letter(i) for i in range(named))}) but the machine has"
+                    f" {n_axes} axes ({' '.join(self.axis_letters)}), so there is no axis"
+                    f" {extra} to keep out of: remove those numbers from min_mm and max_mm, or"
+                    " use the config written for this machine"
+                )
         self.keep_outs = tuple(zones)
 
     def set_axis_letters(self, letters: Sequence[str]) -> None:
@@ -469,7 +513,10 @@ class MachineModel:
         self.spindle_rpm = report.spindle_speed
         if report.buffer is not None:
             self.buffer = report.buffer
-            self._max_planner_free_seen = max(self._max_planner_free_seen, report.buffer[0])
+            if report.state == "Idle":
+                free = report.buffer[0]
+                seen = self._idle_planner_free_max
+                self._idle_planner_free_max = free if seen is None else max(seen, free)
         self.line_number = report.line_number
         # Pn is printed only while some pin is triggered, so its absence means none (firmware-facts
         # §5.4).
@@ -491,6 +538,9 @@ class MachineModel:
         self.state, self.substate = None, None
         self.wpos_mm, self.wco_mm = None, None
         self.buffer = None
+        # A reboot may come back with another planner size (grblHAL's `$398` takes effect only
+        # then, firmware-facts §7): measure it again in the next Idle report.
+        self._idle_planner_free_max = None
         self.feed_mm_min = None
         self.overrides = (100, 100, 100)
         self.modal = ModalState()

@@ -10,7 +10,10 @@ caller.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Final
 
 from smoothjog.core.errors import CoreError
 from smoothjog.core.firmware import FirmwareName
@@ -101,6 +104,38 @@ class VersionInfo:
     version: str
     build: str
     user: str
+
+
+#: The `[OPT:]` letters Grbl 1.1h, grblHAL and FluidNC print, each with what it says about the
+#: build (`report_build_info` in Grbl's and grblHAL's report.c, FluidNC's Report.cpp). Punctuation
+#: and digits are letters too. Starred meanings are printed when a feature is compiled *out*.
+OPTION_CODES: Final[Mapping[str, str]] = MappingProxyType(
+    {
+        "V": "variable spindle",
+        "N": "line numbers",
+        "M": "mist coolant (M7)",
+        "C": "CoreXY kinematics",
+        "P": "parking motion",
+        "Z": "homing sets the origin at the switches (HOMING_FORCE_SET_ORIGIN, firmware-facts §2)",
+        "H": "single-axis homing commands ($HX ...)",
+        "T": "two limit switches on one pin",
+        "A": "feed override allowed while probing",
+        "D": "spindle direction pin used as the enable pin",
+        "0": "spindle off at zero speed",
+        "S": "software debounce of the limit pins",
+        "R": "parking override control (M56)",
+        "L": "no alarm lock at power-up (HOMING_INIT_LOCK off)",
+        "+": "safety door input pin",
+        "*": "*restore-all command ($RST=*)",
+        "$": "*restore-settings command ($RST=$)",
+        "#": "*restore-parameters command ($RST=#)",
+        "I": "*build-info write command ($I=...)",
+        "E": "*planner sync before a settings write",
+        "W": "*planner sync before a work offset change",
+        "2": "dual (ganged) axis motors",
+        "B": "Bluetooth (FluidNC)",
+    }
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -434,8 +469,12 @@ def _parse_opt(body: str) -> BuildOptions:
     """`V,15,128` -> letters, planner blocks, RX bytes; more fields (grblHAL) kept as text."""
     parts = body.split(",")
     codes = parts[0]
-    if not codes.isalnum() and codes != "":
-        raise _MalformedLineError(f"OPT codes {codes!r} are not letters")
+    # Any printable ASCII mark is a letter here, documented in OPTION_CODES or not: the sizes
+    # after it must never be lost to a letter this table does not know yet. Spaces and non-ASCII
+    # are noise, since no firmware prints them.
+    bad = next((c for c in codes if not "!" <= c <= "~"), None)
+    if bad is not None:
+        raise _MalformedLineError(f"OPT codes {codes!r} hold {bad!r}, which no firmware prints")
     blocks = _parse_int(parts[1], "OPT planner blocks") if len(parts) > 1 else None
     rx_bytes = _parse_int(parts[2], "OPT RX buffer size") if len(parts) > 2 else None
     return BuildOptions(codes, blocks, rx_bytes, tuple(parts[3:]))
