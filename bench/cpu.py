@@ -1,6 +1,7 @@
 """Host CPU per second of held jog: `smoothjog jog --port` against `smoothjog sim` on a pty.
 
-Usage: `python -m bench cpu [--speeds 0.5,1.0] [--hold-s 20] [--repeat 3] [--machine hobby-router]`.
+Usage: `python -m bench cpu [--speeds 0.5,1.0] [--hold-s 20] [--repeat 3] [--machine hobby-router]
+[--src DIR] [--reference-src DIR]`.
 
 The simulator runs as its own process on a pseudo-terminal. Each measurement runs the real
 `smoothjog jog --port PTY --replay FILE` twice, once holding the stick for a short time (0.1 s)
@@ -9,6 +10,12 @@ handshake and shutdown cost the same in both runs, so (cpu_long - cpu_short) / (
 hold_short) is the CPU the host spends per second of held jog. The simulator's CPU over the same
 windows (from /proc/PID/stat) is reported beside it for reference. Only the command line is
 used, never smoothjog's modules, so the figure stays comparable while the host is rewritten.
+
+The machine is shared and noisy, and noise moves every process at once, so one figure alone is
+worth little. With `--reference-src DIR` a second host, `python -m smoothjog` with PYTHONPATH=DIR
+(another checkout's src), is measured back to back with the one under test, against the same
+simulator and in alternating order, and the ratio under-test / reference is taken per repeat.
+`--src DIR` selects the tree under test the same way (default: the installed `smoothjog`).
 """
 
 from __future__ import annotations
@@ -28,8 +35,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 
@@ -131,11 +138,16 @@ class Run:
     end_mm: float
     lines_sent: int | None
     where: str
+    role: str = "under test"
 
 
 @dataclass(frozen=True)
 class Row:
-    """Per speed: the figures of each repeat, as fractions of one core (CPU s per s)."""
+    """Per speed: the figures of each repeat, as fractions of one core (CPU s per s).
+
+    Everything but the ref_ fields and ratio is of the host under test; with no reference those
+    three are empty. ratio[k] = host[k] / ref[k] for the repeats where ref[k] is above zero.
+    """
 
     speed: float
     speed_mm_s: float
@@ -144,6 +156,9 @@ class Row:
     lines_per_s: list[float]
     moved_mm: list[float]
     short_cpu_s: list[float]
+    ref: list[float] = field(default_factory=list)
+    ref_sim: list[float] = field(default_factory=list)
+    ratio: list[float] = field(default_factory=list)
 
 
 def legs_for(hold_s: float, speed_mm_s: float, span_mm: float) -> int:
@@ -223,6 +238,67 @@ def _child_env() -> dict[str, str]:
     return env
 
 
+@dataclass(frozen=True)
+class Host:
+    """One way of starting smoothjog: a role in the report, a command, and the tree it imports."""
+
+    role: str
+    cmd: tuple[str, ...]
+    #: The folder put on PYTHONPATH (a checkout's src); None runs the installed command as is.
+    src: Path | None = None
+
+    def env(self) -> dict[str, str]:
+        """The environment of its runs: no user config, PYTHONPATH set to src when there is one."""
+        env = _child_env()
+        if self.src is not None:
+            env["PYTHONPATH"] = str(self.src)
+        return env
+
+    def shown(self, args: str) -> str:
+        """The command line of `smoothjog ARGS` as the report writes it."""
+        if self.src is None:
+            return f"`smoothjog {args}`"
+        return f"`python -m smoothjog {args}` with PYTHONPATH={self.src}"
+
+
+def _imported_from(env: dict[str, str]) -> Path:
+    """The folder of the smoothjog package this interpreter imports with env; BenchError if none."""
+    cmd = [sys.executable, "-c", "import smoothjog, sys; print(smoothjog.__file__)"]
+    try:
+        done = subprocess.run(
+            cmd, capture_output=True, text=True, env=env, timeout=RUN_SLACK_S, check=False
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise BenchError(f"`{shlex.join(cmd)}` did not run: {exc}") from None
+    if done.returncode != 0:
+        raise BenchError(
+            f"`{shlex.join(cmd)}` with PYTHONPATH={env.get('PYTHONPATH', '')} failed (exit"
+            f" {done.returncode}): smoothjog does not import; its stderr ended:\n"
+            f"{_tail(done.stderr)}"
+        )
+    return Path(done.stdout.strip()).resolve().parent
+
+
+def host_from_src(src: str, role: str) -> Host:
+    """`python -m smoothjog` importing from src; BenchError unless smoothjog comes from there."""
+    folder = Path(src).resolve()
+    if not (folder / "smoothjog").is_dir():
+        raise BenchError(
+            f"{src} ({role}) has no smoothjog package folder: give a checkout's src folder,"
+            " the one that holds smoothjog/"
+        )
+    host = Host(role, (sys.executable, "-m", "smoothjog"), folder)
+    found = _imported_from(host.env())
+    if found != folder / "smoothjog":
+        # An installed copy or the working folder can shadow PYTHONPATH; its figures would lie.
+        raise BenchError(
+            f"with PYTHONPATH={folder}, {sys.executable} imports smoothjog from {found}, not from"
+            f" {folder / 'smoothjog'}; the {role} tree would not be the one measured. Run the"
+            " benchmark from a folder without its own smoothjog package, or check the path"
+        )
+    return host
+
+
 def find_smoothjog() -> str:
     """The `smoothjog` script beside this interpreter, else the one on PATH."""
     beside = Path(sys.executable).parent / "smoothjog"
@@ -237,9 +313,9 @@ def find_smoothjog() -> str:
 class Bench:
     """The simulator process, its pty and a scratch folder, all removed by close()."""
 
-    def __init__(self, exe: str, machine: str, firmware: str, axis: str) -> None:
-        """Prepare; start() launches the simulator."""
-        self.exe = exe
+    def __init__(self, host: Host, machine: str, firmware: str, axis: str) -> None:
+        """Prepare; start() launches the simulator with the host's tree."""
+        self.host = host
         self.machine = machine
         self.firmware = firmware
         self.axis = axis
@@ -274,7 +350,7 @@ class Bench:
     def start(self) -> None:
         """Launch `smoothjog sim --link PTY` and wait until the pty exists and it says so."""
         cmd = [
-            self.exe,
+            *self.host.cmd,
             "sim",
             "--firmware",
             self.firmware,
@@ -295,7 +371,7 @@ class Bench:
                 stdout=out,
                 stderr=err,
                 stdin=subprocess.DEVNULL,
-                env=_child_env(),
+                env=self.host.env(),
                 start_new_session=True,
             )
         deadline = time.monotonic() + SIM_READY_S
@@ -327,8 +403,11 @@ class Bench:
             )
         return self.sim.pid
 
-    def run_cli(self, args: list[str], timeout_s: float) -> tuple[int, str, str, float, float]:
-        """Run `smoothjog ARGS`: exit code, stdout, stderr, CPU s (user + sys), wall s."""
+    def run_cli(
+        self, args: list[str], timeout_s: float, host: Host | None = None
+    ) -> tuple[int, str, str, float, float]:
+        """Run `smoothjog ARGS` (host default: the bench's): exit, stdout, stderr, CPU s, wall s."""
+        host = host or self.host
         self._check_sim()
         self._runs += 1
         out_path = self.dir / f"run{self._runs}.out"
@@ -336,11 +415,11 @@ class Bench:
         with out_path.open("wb") as out, err_path.open("wb") as err:
             started = time.monotonic()
             self.child = subprocess.Popen(
-                [self.exe, *args],
+                [*host.cmd, *args],
                 stdout=out,
                 stderr=err,
                 stdin=subprocess.DEVNULL,
-                env=_child_env(),
+                env=host.env(),
                 start_new_session=True,
             )
             pid = self.child.pid
@@ -351,7 +430,8 @@ class Bench:
                     break
                 if time.monotonic() - started > timeout_s:
                     raise BenchError(
-                        f"`smoothjog {' '.join(args)}` still ran after {timeout_s:.0f} s;"
+                        f"{host.shown(' '.join(args))} ({host.role}) still ran after"
+                        f" {timeout_s:.0f} s;"
                         f" its output ended:\n{_tail(out_path.read_text(errors='replace'))}"
                     )
                 time.sleep(POLL_S)
@@ -378,8 +458,11 @@ class Bench:
             )
         return parse_info(out, self.axis)
 
-    def jog(self, lines: list[str], settle_s: float, what: str) -> tuple[str, float, float, float]:
+    def jog(
+        self, lines: list[str], settle_s: float, what: str, host: Host | None = None
+    ) -> tuple[str, float, float, float]:
         """Run one replay on the pty: stdout, host CPU s, simulator CPU s (nan: unknown), wall s."""
+        host = host or self.host
         replay = self.dir / "replay.jsonl"
         replay.write_text("\n".join(lines) + "\n", encoding="utf-8")
         args = [
@@ -395,11 +478,11 @@ class Bench:
         ]
         sim_pid = self._check_sim()
         sim_before = _proc_cpu_s(sim_pid)
-        code, out, err, cpu_s, wall_s = self.run_cli(args, RUN_SLACK_S + LEAD_S + settle_s)
+        code, out, err, cpu_s, wall_s = self.run_cli(args, RUN_SLACK_S + LEAD_S + settle_s, host)
         sim_after = _proc_cpu_s(sim_pid)
         if code != 0:
             raise BenchError(
-                f"`smoothjog {' '.join(args)}` ({what}) failed with exit {code}; its output"
+                f"{host.shown(' '.join(args))} ({what}) failed with exit {code}; its output"
                 f" ended:\n{_tail(out)}\nand its stderr:\n{_tail(err)}"
             )
         sim_cpu = (
@@ -456,8 +539,9 @@ class Runner:
         self.pos_mm, _sent, _where = parse_jog(out, self.limits.axis)
         self._say(f"  moved {self.limits.axis} to {self.pos_mm:.1f} mm to make room")
 
-    def measure(self, speed: float, hold_s: float, legs: int) -> Run:
-        """One measured hold from wherever the axis is, first toward the end with more room."""
+    def measure(self, speed: float, hold_s: float, legs: int, host: Host | None = None) -> Run:
+        """One measured hold by host (default: the bench's), first toward the end with more room."""
+        host = host or self.bench.host
         sign = -1 if self.pos_mm - self.lo_mm >= self.hi_mm - self.pos_mm else 1
         plan = Plan(self.limits.axis, speed, hold_s, legs, sign)
         room = self.pos_mm - self.lo_mm if sign < 0 else self.hi_mm - self.pos_mm
@@ -466,14 +550,14 @@ class Runner:
             plan = Plan(self.limits.axis, speed, hold_s, legs, -1)
         start = self.pos_mm
         settle_s = 10.0 + 2 * self.limits.speed_mm_s(speed) / self.limits.accel_mm_s2
-        what = f"{hold_s:g} s hold at speed {speed:g}"
-        out, cpu_s, sim_s, wall_s = self.bench.jog(plan.replay_lines(), settle_s, what)
+        what = f"{hold_s:g} s hold at speed {speed:g}, {host.role}"
+        out, cpu_s, sim_s, wall_s = self.bench.jog(plan.replay_lines(), settle_s, what, host)
         end, sent, where = parse_jog(out, self.limits.axis)
         self.pos_mm = end
         expected = plan.expected_move_mm(self.limits)
         moved = end - start
         # Well under what was scripted means the host idled: its CPU figure would be meaningless.
-        if legs % 2 and not moved * sign >= 0.3 * abs(expected):
+        if legs % 2 and not moved * plan.sign >= 0.3 * abs(expected):
             raise BenchError(
                 f"the {what} moved {self.limits.axis} by {moved:+.2f} mm where about"
                 f" {expected:+.2f} mm was scripted: the jog did not run; its output:\n{_tail(out)}"
@@ -483,7 +567,7 @@ class Runner:
             f" {self.limits.axis} {start:.1f} -> {end:.1f} mm"
         )
         sim_cpu_s = None if math.isnan(sim_s) else sim_s
-        return Run(speed, hold_s, cpu_s, sim_cpu_s, wall_s, start, end, sent, where)
+        return Run(speed, hold_s, cpu_s, sim_cpu_s, wall_s, start, end, sent, where, host.role)
 
 
 def measure_all(
@@ -494,49 +578,71 @@ def measure_all(
     hold_s: float,
     repeat: int,
     *,
+    reference: Host | None = None,
     log: bool = True,
 ) -> tuple[list[Row], list[Run], int]:
-    """Interleaved short and long holds per speed and repeat; per-speed rows, the runs, legs."""
+    """Interleaved short and long holds per repeat, speed and host; per-speed rows, the runs, legs.
+
+    With a reference, both hosts run back to back for each repeat and speed, against the same
+    simulator; repeats 1, 3, 5, ... start with the host under test, 2, 4, ... with the reference,
+    so neither always meets the machine in the same state.
+    """
     limits = controller.limits
     fastest = limits.speed_mm_s(max(speeds))
     lo, hi = _usable(limits, fastest)
     legs = legs_for(hold_s, fastest, hi - lo)
     runner = Runner(bench, controller, lo, hi, log)
     runs: list[Run] = []
-    pairs: dict[float, list[tuple[Run, Run]]] = {s: [] for s in speeds}
+    under: dict[float, list[tuple[Run, Run]]] = {s: [] for s in speeds}
+    ref: dict[float, list[tuple[Run, Run]]] = {s: [] for s in speeds}
     for k in range(repeat):
         for speed in speeds:
             if log:
                 print(f"repeat {k + 1}/{repeat}, speed {speed:g}", file=sys.stderr, flush=True)
-            short = runner.measure(speed, short_s, 1)
-            long = runner.measure(speed, hold_s, legs)
-            runs += [short, long]
-            pairs[speed].append((short, long))
+            order = [(bench.host, under)]
+            if reference is not None:
+                order.insert(1 - k % 2, (reference, ref))
+            for host, pairs in order:
+                short = runner.measure(speed, short_s, 1, host)
+                long = runner.measure(speed, hold_s, legs, host)
+                runs += [short, long]
+                pairs[speed].append((short, long))
     dt = hold_s - short_s
-    rows = []
-    for speed, done in pairs.items():
-        lines = [
-            (lg.lines_sent - sh.lines_sent) / dt
-            for sh, lg in done
-            if sh.lines_sent is not None and lg.lines_sent is not None
-        ]
-        sims = [
-            (lg.sim_cpu_s - sh.sim_cpu_s) / dt
-            for sh, lg in done
-            if sh.sim_cpu_s is not None and lg.sim_cpu_s is not None
-        ]
-        rows.append(
-            Row(
-                speed=speed,
-                speed_mm_s=limits.speed_mm_s(speed),
-                host=[(lg.host_cpu_s - sh.host_cpu_s) / dt for sh, lg in done],
-                sim=sims,
-                lines_per_s=lines,
-                moved_mm=[abs(lg.end_mm - lg.start_mm) for _sh, lg in done],
-                short_cpu_s=[sh.host_cpu_s for sh, _lg in done],
-            )
-        )
+    rows = [build_row(speed, limits, dt, under[speed], ref[speed]) for speed in speeds]
     return rows, runs, legs
+
+
+def build_row(
+    speed: float,
+    limits: AxisLimits,
+    dt_s: float,
+    under: list[tuple[Run, Run]],
+    ref: list[tuple[Run, Run]],
+) -> Row:
+    """One speed's row from its (short, long) run pairs, repeat k at index k; ref may be empty."""
+
+    def each(pairs: list[tuple[Run, Run]], of: Callable[[Run], float | None]) -> list[float]:
+        """(long - short) / dt per repeat, leaving out repeats where the figure is unknown."""
+        got = [(of(sh), of(lg)) for sh, lg in pairs]
+        return [(lg - sh) / dt_s for sh, lg in got if sh is not None and lg is not None]
+
+    host = each(under, lambda r: r.host_cpu_s)
+    ref_host = each(ref, lambda r: r.host_cpu_s)
+    # Per repeat, not median over median: a burst of noise moves both hosts of one repeat alike.
+    # A reference figure at or below zero (noise swamping a tiny cost) gives no ratio.
+    ratio = [h / r for h, r in zip(host, ref_host, strict=True) if r > 0] if ref else []
+    return Row(
+        speed=speed,
+        speed_mm_s=limits.speed_mm_s(speed),
+        host=host,
+        sim=each(under, lambda r: r.sim_cpu_s),
+        lines_per_s=each(under, lambda r: r.lines_sent),
+        moved_mm=[abs(lg.end_mm - lg.start_mm) for _sh, lg in under],
+        short_cpu_s=[sh.host_cpu_s for sh, _lg in under],
+        ref=ref_host,
+        ref_sim=each(ref, lambda r: r.sim_cpu_s),
+        ratio=ratio,
+    )
 
 
 def _spread(values: list[float], scale: float, unit: str, digits: int = 1) -> str:
@@ -551,25 +657,56 @@ def _spread(values: list[float], scale: float, unit: str, digits: int = 1) -> st
 
 
 def table(rows: list[Row], axis: str) -> list[str]:
-    """The Markdown table: one row per speed."""
-    out = [
-        "| stick speed | feed | host CPU per s of held jog, % of one core"
-        " | simulator, % of one core | host lines/s | host CPU of a short run"
-        " | net move per long hold |",
-        "|---|---|---|---|---|---|---|",
+    """The Markdown table: one row per speed; the reference's columns only if one was measured."""
+    with_ref = any(row.ref for row in rows)
+    heads = [
+        "stick speed",
+        "feed",
+        "host CPU per s of held jog, % of one core",
+        "host, least disturbed (min of repeats)",
+        *(
+            [
+                "reference host, % of one core",
+                "under test / reference, per repeat",
+                "simulator, % of one core",
+                "simulator during the reference's runs",
+            ]
+            if with_ref
+            else ["simulator, % of one core"]
+        ),
+        "host lines/s",
+        "host CPU of a short run",
+        "net move per long hold",
     ]
+    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
     for row in rows:
         lines = (
             _spread(row.lines_per_s, 1.0, "", 0)
             if row.lines_per_s
             else "not printed by `smoothjog jog`"
         )
-        out.append(
-            f"| {100 * row.speed:.0f} % | {row.speed_mm_s:.1f} mm/s"
-            f" | {_spread(row.host, 100.0, ' %')} | {_spread(row.sim, 100.0, ' %')}"
-            f" | {lines} | {_spread(row.short_cpu_s, 1.0, ' s', 2)}"
-            f" | {axis} {_spread(row.moved_mm, 1.0, ' mm', 0)} |"
+        least = f"{100 * min(row.host):.1f} %" if row.host else "n/a"
+        sims = (
+            [
+                _spread(row.ref, 100.0, " %"),
+                _spread(row.ratio, 1.0, "", 2),
+                _spread(row.sim, 100.0, " %"),
+                _spread(row.ref_sim, 100.0, " %"),
+            ]
+            if with_ref
+            else [_spread(row.sim, 100.0, " %")]
         )
+        cells = [
+            f"{100 * row.speed:.0f} %",
+            f"{row.speed_mm_s:.1f} mm/s",
+            _spread(row.host, 100.0, " %"),
+            least,
+            *sims,
+            lines,
+            _spread(row.short_cpu_s, 1.0, " s", 2),
+            f"{axis} {_spread(row.moved_mm, 1.0, ' mm', 0)}",
+        ]
+        out.append("| " + " | ".join(cells) + " |")
     return out
 
 
@@ -609,7 +746,19 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--firmware", default="grbl", help="sim firmware (default grbl)")
     parser.add_argument("--axis", default="X", choices=list("XYZ"), type=str.upper)
     parser.add_argument("--out", default="bench/results", help="folder for cpu.md")
-    parser.add_argument("--smoothjog", help="the smoothjog command (default: beside python)")
+    tree = parser.add_mutually_exclusive_group()
+    tree.add_argument("--smoothjog", help="the smoothjog command (default: beside python)")
+    tree.add_argument(
+        "--src",
+        metavar="DIR",
+        help="the tree under test: a checkout's src, run as python -m smoothjog with PYTHONPATH=DIR"
+        " (default: the installed smoothjog); the simulator runs from it too",
+    )
+    parser.add_argument(
+        "--reference-src",
+        metavar="DIR",
+        help="a second checkout's src, measured back to back with the host under test",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--note", help="a line for the report, e.g. which tree was measured")
     return parser
@@ -624,6 +773,7 @@ def report(
     runs: list[Run],
     legs: int,
     load: tuple[tuple[float, ...], tuple[float, ...]],
+    reference: Host | None = None,
 ) -> list[str]:
     """The whole Markdown report."""
     lim = controller.limits
@@ -651,29 +801,52 @@ def report(
     # The scratch pty's path changes every run; the report names it PTY.
     wheres = sorted({r.where.replace(str(bench.pty), "PTY") for r in runs})
     banner = re.search(r"^smoothjog sim: (.+?) on pty", bench.sim_ready)
+    jog_args = f"jog --port PTY --baud {BAUD} --replay FILE"
+    sim_args = f"sim --firmware {args.firmware} --machine {args.machine} --link PTY --baud {BAUD}"
+    if reference is None:
+        hosts = [
+            f"- Host: {bench.host.shown(jog_args)}, default config; one process per run,"
+            " CPU = user + sys from os.wait4",
+            f"- Source: {_tree(bench.host)}",
+        ]
+        figure = f"median of {args.repeat} (range in brackets)"
+    else:
+        hosts = [
+            f"- Host under test: {bench.host.shown(jog_args)}; source: {_tree(bench.host)}",
+            f"- Reference host: {reference.shown(jog_args)}; source: {_tree(reference)}",
+            "- Both hosts: default config; one process per run, CPU = user + sys from os.wait4;"
+            " for every repeat and speed both are measured back to back against the same"
+            " simulator process, the host under test first in repeats 1, 3, 5, ... and the"
+            " reference first in repeats 2, 4, ...",
+        ]
+        figure = (
+            f"median of {args.repeat} (range in brackets); the ratio is computed per repeat,"
+            " the host under test's figure divided by the reference's from the same repeat and"
+            " speed, and the table gives the median and range of those ratios, so noise that"
+            " moves both hosts alike cancels"
+        )
     return [
         "# CPU benchmark: host CPU while a jog is held",
         "",
         f"Command: `{shlex.join(['python', '-m', 'bench', 'cpu', *argv])}`",
         "",
-        f"- Simulator: `smoothjog sim --firmware {args.firmware} --machine {args.machine}"
-        f" --link PTY --baud {BAUD}` in its own process, serving"
+        f"- Simulator: {bench.host.shown(sim_args)} in its own process (the tree under test),"
+        " serving"
         f" {banner.group(1) if banner else bench.sim_ready}",
         f"- Controller: {controller.firmware}; machine {args.machine}; {lim.axis} max rate"
         f" {lim.max_rate_mm_min:g} mm/min, {lim.accel_mm_s2:g} mm/s², {limits}",
         f"- Link: pseudo-terminal, {BAUD} baud (jog reported: {', '.join(wheres)})",
-        f"- Host: `smoothjog jog --port PTY --baud {BAUD} --replay FILE`, default config;"
-        f" one process per run, CPU = user + sys from os.wait4",
+        *hosts,
         f"- Stick: {lim.axis} axis at full deflection, speed as below; press {LEAD_S:g} s into"
         f" the replay, release after the hold; holds of {args.short_s:g} s and {args.hold_s:g} s;"
         f" {pattern}",
         f"- Figure: (CPU of the {args.hold_s:g} s run - CPU of the {args.short_s:g} s run) /"
-        f" {args.hold_s - args.short_s:g} s; median of {args.repeat} (range in brackets);"
-        " simulator CPU from /proc/PID/stat over the same runs",
+        f" {args.hold_s - args.short_s:g} s; {figure}; least disturbed = the lowest of the"
+        " repeats, since noise here only ever adds CPU time; simulator CPU from /proc/PID/stat"
+        " over the same runs",
         f"- Machine: {platform.node()}, {os.cpu_count()} CPUs, Python"
         f" {platform.python_version()}, load average {load[0][0]:.2f} before,"
         f" {load[1][0]:.2f} after (shared and noisy: compare medians, mind the ranges)",
-        f"- Source: {_tree()}",
         *([f"- Note: {args.note}"] if args.note else []),
         "",
         *table(rows, lim.axis),
@@ -688,26 +861,21 @@ def _git(folder: Path, *args: str) -> str:
     ).stdout.strip()
 
 
-def _tree() -> str:
-    """Which smoothjog the children import (a PYTHONPATH may pick another copy) and its commit."""
+def _tree(host: Host) -> str:
+    """Which smoothjog the host's runs import, and its commit: a PYTHONPATH may pick a copy."""
     try:
-        found = subprocess.run(
-            [sys.executable, "-c", "import smoothjog; print(smoothjog.__file__)"],
-            capture_output=True,
-            text=True,
-            check=True,
-            env=_child_env(),
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
+        package = _imported_from(host.env())
+    except BenchError:
         return "unknown (smoothjog does not import)"
-    folder = Path(found).parent
+    # A src on PYTHONPATH sits in a checkout: its parent is the checkout's top (or within it).
+    where = host.src.parent if host.src is not None else package
     try:
-        head = _git(folder, "rev-parse", "--short", "HEAD")
-        dirty = _git(folder, "status", "--porcelain", "--untracked-files=no", "--", ".")
+        head = _git(where, "rev-parse", "--short", "HEAD")
+        dirty = _git(package, "status", "--porcelain", "--untracked-files=no", "--", ".")
     except (OSError, subprocess.CalledProcessError):
-        return f"smoothjog from {folder} (not a git checkout)"
+        return f"smoothjog from {package} (not a git checkout)"
     changed = " with uncommitted changes" if dirty else ""
-    return f"smoothjog from {folder}, commit {head}{changed}"
+    return f"smoothjog from {package}, commit {head}{changed}"
 
 
 @contextlib.contextmanager
@@ -737,8 +905,15 @@ def main(argv: list[str] | None = None) -> int:
     load_before = os.getloadavg()
     try:
         with _sigterm_as_interrupt():
-            exe = args.smoothjog or find_smoothjog()
-            with Bench(exe, args.machine, args.firmware, args.axis) as bench:
+            under = (
+                host_from_src(args.src, "under test")
+                if args.src
+                else Host("under test", (args.smoothjog or find_smoothjog(),))
+            )
+            reference = (
+                host_from_src(args.reference_src, "reference") if args.reference_src else None
+            )
+            with Bench(under, args.machine, args.firmware, args.axis) as bench:
                 controller = bench.info()
                 rows, runs, legs = measure_all(
                     bench,
@@ -747,11 +922,11 @@ def main(argv: list[str] | None = None) -> int:
                     args.short_s,
                     args.hold_s,
                     args.repeat,
+                    reference=reference,
                     log=not args.quiet,
                 )
-                text = report(
-                    argv, args, bench, controller, rows, runs, legs, (load_before, os.getloadavg())
-                )
+                load = (load_before, os.getloadavg())
+                text = report(argv, args, bench, controller, rows, runs, legs, load, reference)
     except BenchError as exc:
         print(f"python -m bench cpu: {exc}", file=sys.stderr)
         return 1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import re
@@ -98,19 +99,130 @@ def test_cpu_bench_runs_the_real_commands_and_writes_its_table(
     assert text.strip() == printed.out.strip()
     assert "machine hobby-router" in text
     assert "115200 baud" in text
-    rows = [line for line in text.splitlines() if line.startswith("| ")]
-    assert len(rows) == 2  # the header and one row for the one speed
-    cells = [c.strip() for c in rows[1].strip("|").split("|")]
-    assert cells[:2] == ["100 %", "83.3 mm/s"]
+    (cells,) = _cells(text)  # one row for the one speed
+    assert (cells["stick speed"], cells["feed"]) == ("100 %", "83.3 mm/s")
+    assert "reference host, % of one core" not in cells
     # One repeat: single figures. The sign of the difference is left to noise (0.2 s of held jog
     # costs less CPU than start-up varies by), so only its form is checked, not a threshold.
-    host, sim = (re.fullmatch(r"(-?\d+\.\d) %", c) for c in cells[2:4])
+    host, least, sim = (
+        re.fullmatch(r"(-?\d+\.\d) %", cells[name])
+        for name in (
+            "host CPU per s of held jog, % of one core",
+            "host, least disturbed (min of repeats)",
+            "simulator, % of one core",
+        )
+    )
     assert host is not None
+    assert least is not None
+    assert least.group(1) == host.group(1)  # the minimum of one repeat is that repeat
     assert sim is not None
     assert math.isfinite(float(host.group(1)))
-    short_cpu = re.fullmatch(r"(\d+\.\d+) s", cells[5])
+    short_cpu = re.fullmatch(r"(\d+\.\d+) s", cells["host CPU of a short run"])
     assert short_cpu is not None
     assert float(short_cpu.group(1)) > 0
-    moved = re.fullmatch(r"X (\d+) mm", cells[6])
+    moved = re.fullmatch(r"X (\d+) mm", cells["net move per long hold"])
     assert moved is not None
     assert float(moved.group(1)) > 0
+
+
+def _cells(text: str) -> list[dict[str, str]]:
+    """The report's table as one dict per row, keyed by column heading."""
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    heads, *body = ([c.strip() for c in row.strip("|").split("|")] for row in rows)
+    return [dict(zip(heads, cells, strict=True)) for cells in body]
+
+
+#: CPU per second of held jog of each fake host, as fractions of one core.
+RATE = {"under test": 0.04, "reference": 0.08}
+#: Per repeat, how much the machine's noise inflates every process that repeat (both hosts alike).
+NOISE = [1.0, 1.5, 1.2]
+
+
+class FakeBench(cpu.Bench):
+    """A Bench whose jog runs no process: it moves the axis as scripted and bills made-up CPU."""
+
+    def __init__(self, host: cpu.Host) -> None:
+        super().__init__(host, "hobby-router", "grbl", "X")
+        self.pos_mm = cpu.parse_info(INFO, "X").pos_mm
+        self.sim_ready = "smoothjog sim: Grbl 1.1h ['$' for help] on pty /tmp/x/pty"
+        self.longs: dict[tuple[str, float], int] = {}
+        self.held: list[tuple[str, float, float]] = []  # role, speed, hold s of each measured run
+
+    def jog(
+        self, lines: list[str], settle_s: float, what: str, host: cpu.Host | None = None
+    ) -> tuple[str, float, float, float]:
+        role = (host or self.host).role
+        steps = [json.loads(line) for line in lines]
+        if "goto" in steps[0]:
+            self.pos_mm = steps[0]["goto"]["x"]
+            return JOG.replace("-10.238", f"{self.pos_mm:.3f}"), 0.5, 0.1, 1.0
+        for step, after in itertools.pairwise(steps):
+            speed_mm_s = step["speed"] * 5000 / 60
+            self.pos_mm += step["axes"]["x"] * speed_mm_s * (after["t"] - step["t"])
+        speed, hold_s = steps[0]["speed"], steps[-1]["t"] - steps[0]["t"]
+        self.held.append((role, speed, hold_s))
+        # The k-th short and long hold of a host at a speed see repeat k's noise.
+        k = self.longs.get((role, speed), 0)
+        if hold_s > 1.0:
+            self.longs[role, speed] = k + 1
+        host_s = 0.5 + RATE[role] * hold_s * NOISE[k]
+        sim_s = 0.1 * hold_s * NOISE[k]
+        out = JOG.replace("-10.238", f"{self.pos_mm:.3f}")
+        return out, host_s, sim_s, hold_s + 1.0
+
+
+def test_reference_runs_back_to_back_alternating_and_ratios_are_per_repeat() -> None:
+    src = Path(cpu.__file__).resolve().parents[1] / "src"
+    under = cpu.Host("under test", ("python", "-m", "smoothjog"), src)
+    reference = cpu.Host("reference", ("python", "-m", "smoothjog"), src)
+    speeds = [0.5, 1.0]
+    bench = FakeBench(under)  # not entered: it starts no simulator
+    try:
+        controller = cpu.parse_info(INFO, "X")
+        rows, runs, legs = cpu.measure_all(
+            bench, controller, speeds, 0.1, 20.0, len(NOISE), reference=reference, log=False
+        )
+        argv = ["--repeat", "3", "--src", str(src), "--reference-src", str(src)]
+        args = cpu._parser().parse_args(argv)
+        text = "\n".join(
+            cpu.report(argv, args, bench, controller, rows, runs, legs, ((0.1,), (0.2,)), reference)
+        )
+    finally:
+        bench.close()
+    # Per repeat and speed: one host's short and long hold, then the other's; who starts alternates.
+    first = ["under test", "reference", "under test"]
+    expected = []
+    for k in range(len(NOISE)):
+        pair = [first[k], "reference" if first[k] == "under test" else "under test"]
+        expected += [(role, s) for s in speeds for role in pair for _hold in (0.1, 20.0)]
+    assert [(role, speed) for role, speed, _hold in bench.held] == expected
+    assert [r.role for r in runs] == [role for role, _speed in expected]
+    for row in rows:
+        assert row.host == pytest.approx([RATE["under test"] * n for n in NOISE])
+        assert row.ref == pytest.approx([RATE["reference"] * n for n in NOISE])
+        # Noise that moves both hosts of a repeat alike leaves the per-repeat ratio untouched.
+        assert row.ratio == pytest.approx([0.5] * len(NOISE))
+    cells = _cells(text)
+    assert [c["stick speed"] for c in cells] == ["50 %", "100 %"]
+    for c in cells:
+        assert c["host CPU per s of held jog, % of one core"] == "4.8 % (4.0 to 6.0)"
+        assert c["host, least disturbed (min of repeats)"] == "4.0 %"
+        assert c["reference host, % of one core"] == "9.6 % (8.0 to 12.0)"
+        assert c["under test / reference, per repeat"] == "0.50 (0.50 to 0.50)"
+        assert c["simulator, % of one core"] == "12.0 % (10.0 to 15.0)"
+        assert c["simulator during the reference's runs"] == "12.0 % (10.0 to 15.0)"
+        assert c["host lines/s"] == "not printed by `smoothjog jog`"
+        assert c["net move per long hold"].startswith("X ")
+    tree = r"source: smoothjog from \S+/src/smoothjog(, commit [0-9a-f]+| \(not a git checkout\))"
+    assert re.search(rf"^- Host under test: `python -m smoothjog jog .*; {tree}", text, re.M)
+    assert re.search(rf"^- Reference host: `python -m smoothjog jog .*; {tree}", text, re.M)
+    assert "the ratio is computed per repeat" in text
+
+
+def test_reference_src_must_be_what_python_imports(tmp_path: Path) -> None:
+    with pytest.raises(cpu.BenchError, match="no smoothjog package folder"):
+        cpu.host_from_src(str(tmp_path), "reference")
+    # A folder without __init__.py loses to the installed package: the check must see it.
+    (tmp_path / "smoothjog").mkdir()
+    with pytest.raises(cpu.BenchError, match="imports smoothjog from"):
+        cpu.host_from_src(str(tmp_path), "reference")
