@@ -69,12 +69,12 @@ class HandwheelIntent:
     speed: float = 1.0
 
 
-Intent = ContinuousIntent | StepIntent | GotoIntent | StopIntent
-#: Every intent an input can produce; the engine takes `Intent` only until it runs handwheels.
-AnyIntent = Intent | HandwheelIntent
+Intent = ContinuousIntent | StepIntent | GotoIntent | StopIntent | HandwheelIntent
+#: The same union under its earlier name: every intent an input can produce, all run by the engine.
+AnyIntent = Intent
 
 
-def validate_intent(intent: AnyIntent, axes: Sequence[str], max_feed_mm_min: float) -> None:
+def validate_intent(intent: Intent, axes: Sequence[str], max_feed_mm_min: float) -> None:
     """Raise JogBuildError, in words, if the intent cannot be run on these axes at this feed.
 
     max_feed_mm_min is the feed at speed 1.0. A stop is always valid.

@@ -20,6 +20,7 @@ import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from decimal import Decimal
 from enum import Enum
 
 from smoothjog.core import increments as inc
@@ -33,6 +34,7 @@ from smoothjog.core.intents import (
     STEP_MIN_MM,
     ContinuousIntent,
     GotoIntent,
+    HandwheelIntent,
     Intent,
     StepIntent,
     StopIntent,
@@ -70,6 +72,7 @@ __all__ = [
     "EngineStats",
     "EngineView",
     "GotoIntent",
+    "HandwheelIntent",
     "Intent",
     "JogTuning",
     "Jogger",
@@ -167,6 +170,12 @@ class JogTuning:
     planner_reserve_blocks: int = 3
     #: Re-ask for a status report if none came within this time.
     status_timeout_s: float = 0.5
+    #: A velocity-mode handwheel that sent no detent for this long has stopped: counts still
+    #: waiting for planner or RX room are dropped, so the machine rests at the end of what was
+    #: sent. Pendants report every 20-50 ms while the wheel turns, so 100 ms is two to five
+    #: reports missed (a stopped wheel, not a late report), and at 5000 mm/min no more than
+    #: 8 mm, about the stopping distance, is ever sent after the wheel stopped.
+    wheel_timeout_s: float = 0.100
 
 
 @dataclass(frozen=True)
@@ -223,6 +232,48 @@ class Phase(Enum):
     SETTLING = "settling"  # waiting for the machine to report rest after the queue ran out
 
 
+@dataclass
+class _WheelRun:
+    """Handwheel detents not yet sent: one axis, one direction, one feed, one mode.
+
+    Reports that agree on all four merge into one run, and so into one line (its distance
+    is exact: a decimal sum of count x step).
+    """
+
+    axis: int  # index into the machine's axes
+    sign: int  # +1 or -1
+    dist_mm: Decimal  # > 0: the detents' distance, exactly as the user's step sizes add up
+    counts: int
+    speed: float
+    mode: str  # "position", "velocity"
+    last_s: float  # when its newest detent arrived (velocity mode's timeout runs from it)
+
+
+@dataclass(frozen=True)
+class _WheelChain:
+    """The running target of one axis's handwheel moves, so that rounding never accumulates.
+
+    Every line goes to the step nearest anchor + total (firmware-facts §1.5), never to the
+    previous target plus this report's distance. The chain holds while the axis's path end is
+    still end_mm (no other move, stop or clip came between).
+    """
+
+    anchor_mm: float  # the axis's parser position where the chain began
+    total_mm: Decimal  # signed detent distance since the anchor
+    end_mm: float  # the axis's path end after the chain's last line
+
+
+@dataclass(frozen=True)
+class _WheelPlan:
+    """The next line of a run (None when it moves no step) and the chain once it is sent."""
+
+    axis: int
+    chain: _WheelChain
+    line: str | None
+    seg: PathSeg | None
+    clipped: bool
+
+
 @dataclass(frozen=True)
 class _LineTag:
     """What the engine keeps with each of its lines in the ledger."""
@@ -254,6 +305,10 @@ class EngineStats:
     error_replies: int = 0
     soft_limit_errors: int = 0
     run_state_seen: int = 0
+    #: Velocity-mode detents dropped: beyond the stopping distance, or left when the wheel stopped.
+    wheel_counts_dropped: int = 0
+    #: Handwheel moves shortened at the soft limits or a keep-out zone (the counts past it dropped).
+    wheel_clips: int = 0
     turn_choices: list[tuple[float, str, float, float]] = field(default_factory=list)
     stops: list[StopRecord] = field(default_factory=list)
 
@@ -317,7 +372,14 @@ class Jogger:
         ) = None
         #: The engine's own lines in the ledger, oldest first.
         self._pending: deque[Entry] = deque()
-        self._steps: deque[StepIntent | GotoIntent] = deque()
+        self._steps: deque[StepIntent | GotoIntent | _WheelRun] = deque()
+        #: Per axis index: the running target of its handwheel moves.
+        self._wheel_chains: dict[int, _WheelChain] = {}
+        #: (axis index, sign) of the newest velocity-mode detents taken: a report the other
+        #: way on that axis is a reversal.
+        self._wheel_dir: tuple[int, int] | None = None
+        #: A settle may go back to streaming when handwheel moves arrive (not after a Run race).
+        self._settle_resumable = False
         self._stop = StopHandshake()
         self._status_asked_s: float | None = None
         #: An Idle report is awaited to end a stop or a settle (the next one counts as fresh).
@@ -348,11 +410,20 @@ class Jogger:
 
     # ----------------------------------------------------------------- inputs
     def set_intent(self, intent: Intent, now_s: float) -> None:
-        """Take the newest intent; the next poll acts on the latest one only."""
+        """Take the newest intent; the next poll acts on the latest one only.
+
+        Steps, go-tos and handwheel detents queue in order behind each other.
+        """
         if isinstance(intent, StepIntent | GotoIntent):
             self._validate(intent)
             self._steps.append(intent)  # steps queue in order; a held stick is released
             self._intent = None
+            return
+        if isinstance(intent, HandwheelIntent):
+            self._validate(intent)
+            if intent.counts:  # a report of no detents (a button) is no motion, nor a sign of life
+                self._take_wheel(intent, now_s)
+                self._intent = None
             return
         if isinstance(intent, StopIntent) or intent.is_neutral():
             self._intent = None
@@ -362,6 +433,58 @@ class Jogger:
         # A neutral stick is a stop and is not checked further (an unknown axis at 0 is fine).
         self._validate(intent)
         self._intent = intent
+
+    def _take_wheel(self, wheel: HandwheelIntent, now_s: float) -> None:
+        """Queue a report's detents; in velocity mode drop what runs past the stopping distance.
+
+        Velocity mode (LinuxCNC's MPG velocity mode): the path ahead of the machine, with what
+        waits unsent, never exceeds v²/2a + v·committed_s at the wheel's feed along the axis,
+        so the machine stops within that of the moment the wheel stops; counts that would go
+        further are dropped. A report the other way on the same axis cancels everything queued
+        (the full stop handshake) and then goes the other way. Position mode keeps every count.
+        """
+        axis = self.limits.axes.index(wheel.axis)
+        sign = 1 if wheel.counts > 0 else -1
+        counts = abs(wheel.counts)
+        if wheel.mode == "velocity":
+            if self._wheel_dir == (axis, -sign):
+                self._steps.clear()
+                # Only what was sent needs the handshake; detents still unsent just go.
+                self._stop_requested = self._stop_requested or bool(self._track.path)
+            self._wheel_dir = (axis, sign)
+            speed_mm_s, accel_mm_s2 = self._wheel_feed(axis, wheel.speed)
+            limit_mm = inc.queue_target_mm(speed_mm_s, accel_mm_s2, self.tuning.committed_s)
+            self._track.update_estimate(now_s)
+            # A path being cancelled (or about to be) is not ahead: the reversal starts after it.
+            stopping = self._stop_requested or self.phase is Phase.STOPPING
+            ahead_mm = 0.0 if stopping else self._track.queued_mm()
+            ahead_mm += sum(float(r.dist_mm) for r in self._steps if isinstance(r, _WheelRun))
+            # A line goes to the step nearest its running target: up to half a step further.
+            ahead_mm += 0.5 / self.limits.steps_per_mm[axis]
+            fit = min(counts, int(max(limit_mm - ahead_mm, 0.0) / wheel.step_mm + 1e-9))
+            self.stats.wheel_counts_dropped += counts - fit
+            counts = fit
+            if not counts:
+                return
+        # The shortest decimal that reads back as step_mm: 0.01, not the binary value near it.
+        dist_mm = Decimal(str(float(wheel.step_mm))) * counts
+        last = self._steps[-1] if self._steps else None
+        if isinstance(last, _WheelRun) and (last.axis, last.sign, last.speed, last.mode) == (
+            axis,
+            sign,
+            wheel.speed,
+            wheel.mode,
+        ):
+            last.dist_mm += dist_mm
+            last.counts += counts
+            last.last_s = now_s
+            return
+        self._steps.append(_WheelRun(axis, sign, dist_mm, counts, wheel.speed, wheel.mode, now_s))
+
+    def _wheel_feed(self, axis: int, speed: float) -> tuple[float, float]:
+        """A handwheel's speed (mm/s: speed x the axis's max rate) and acceleration on axis."""
+        feed_mm_min = round(self.limits.max_rate_mm_min[axis] * speed, 3)
+        return mm_min_to_mm_s(feed_mm_min), self.limits.accel_mm_s2[axis]
 
     def _validate(self, intent: Intent) -> None:
         """Refuse, in words, an intent this machine cannot run."""
@@ -484,6 +607,16 @@ class Jogger:
                 self.phase = Phase.STEPPING
             elif self._intent is not None and self._may_jog():
                 self._start_jogging(now_s)
+        elif (
+            self.phase is Phase.SETTLING
+            and self._settle_resumable
+            and self._steps
+            and isinstance(self._steps[0], _WheelRun)
+        ):
+            # A wheel turned while its earlier moves run out: queue behind them at once rather
+            # than stop, report Idle and start again (a stutter at every report).
+            self.phase = Phase.STEPPING
+            self._fresh_status_wanted = False
         try:
             if self.phase is Phase.JOGGING:
                 if not self._may_jog():
@@ -783,8 +916,23 @@ class Jogger:
         usable_blocks = max(self.limits.planner_blocks - self.tuning.planner_reserve_blocks, 1)
         while self._steps and self._track.blocks_in_planner() < usable_blocks:
             step = self._steps[0]
-            line_seg = self._step_line(step)
+            plan: _WheelPlan | None = None
+            if isinstance(step, _WheelRun):
+                if step.mode == "velocity" and now_s - step.last_s > self.tuning.wheel_timeout_s:
+                    # The wheel stopped while these waited for room: the machine rests at the
+                    # end of what was sent instead of running on after it.
+                    self.stats.wheel_counts_dropped += step.counts
+                    self._steps.popleft()
+                    continue
+                if step.mode == "position" and self._wheel_waits(step):
+                    break  # merge further reports into this run while the queue holds speed
+                plan = self._plan_wheel(step)
+                line_seg = None if plan.line is None or plan.seg is None else (plan.line, plan.seg)
+            else:
+                line_seg = self._step_line(step)
             if line_seg is None:
+                if plan is not None:
+                    self._commit_wheel(plan, now_s)
                 self._steps.popleft()
                 continue
             line, seg = line_seg
@@ -792,10 +940,107 @@ class Jogger:
                 self._rx_blocked = True
                 return
             self._steps.popleft()
+            if plan is not None:
+                self._commit_wheel(plan, now_s)
             self._track.append(seg)
             self._send(line, "jog", now_s, out, seg)
         if not self._steps and not self._lines_unanswered():
             self._settle(now_s)
+
+    def _wheel_waits(self, run: _WheelRun) -> bool:
+        """True while the path queued already keeps the machine at the run's speed.
+
+        Until the queue drains to v²/2a plus the time to the next look (committed segments, a
+        round trip, a settle tick), sending the run gains nothing; meanwhile later reports
+        merge into it, so a wheel spun faster than the machine sends a few long lines.
+        """
+        if not self._track.path:
+            return False
+        speed_mm_s, accel_mm_s2 = self._wheel_feed(run.axis, run.speed)
+        ahead_s = (
+            self.tuning.committed_s
+            + self._rtt_s
+            + self.tuning.link_margin_s
+            + self.tuning.settle_tick_s
+        )
+        return self._track.queued_mm() >= inc.queue_target_mm(speed_mm_s, accel_mm_s2, ahead_s)
+
+    def _plan_wheel(self, run: _WheelRun) -> _WheelPlan:
+        """The G91 line taking the run's axis to the step nearest its running target.
+
+        The target is clipped at the soft limits (one step inside) and one step short of a
+        keep-out zone: a wheel spun into a limit stops there, and the counts past it are
+        dropped (the chain starts again at the edge, so turning back moves off it at once).
+        """
+        start = self._track.end_mm
+        assert start is not None
+        i = run.axis
+        spm = self.limits.steps_per_mm[i]
+        chain = self._wheel_chains.get(i)
+        if chain is None or chain.end_mm != start[i]:
+            chain = _WheelChain(start[i], Decimal(0), start[i])
+        total_mm = chain.total_mm + run.sign * run.dist_mm
+        target = inc.nearest_step_mm(Decimal(chain.anchor_mm) + total_mm, spm)
+        chain = _WheelChain(chain.anchor_mm, total_mm, start[i])
+        room_mm = self._wheel_room_mm(start, i, run.sign)
+        clipped = (target - start[i]) * run.sign > room_mm
+        if clipped:
+            # Round toward the start so the edge's one step of margin is kept.
+            edge = (start[i] + run.sign * room_mm) * spm
+            target = (math.floor(edge + 1e-9) if run.sign > 0 else math.ceil(edge - 1e-9)) / spm
+            chain = _WheelChain(target, Decimal(0), start[i])
+        d = float(format_number(target - start[i], MM_DECIMALS))
+        end = tuple(s + (d if k == i else 0.0) for k, s in enumerate(start))
+        if d * run.sign <= 0.0 or not self._fits_envelope(end):
+            return _WheelPlan(i, chain, None, None, clipped)
+        feed_mm_min = round(self.limits.max_rate_mm_min[i] * run.speed, 3)
+        speed_mm_s, accel_mm_s2 = self._wheel_feed(i, run.speed)
+        line = build_jog_line(
+            moves={self.limits.axes[i]: d},
+            feed_mm_min=feed_mm_min,
+            mode="G91",
+            axes=self.limits.axes,
+            max_line_chars=self.limits.max_line_chars,
+        )
+        seg = PathSeg(start, end, abs(d), speed_mm_s, accel_mm_s2, self._track.length_mm())
+        return _WheelPlan(
+            i, _WheelChain(chain.anchor_mm, chain.total_mm, end[i]), line, seg, clipped
+        )
+
+    def _commit_wheel(self, plan: _WheelPlan, now_s: float) -> None:
+        """The run's line was sent (or moved no step): keep its chain, and say if it was cut.
+
+        The user hears of a limit once, with the line that reaches it; reports that find the
+        wheel already there are counted only.
+        """
+        self._wheel_chains[plan.axis] = plan.chain
+        if plan.clipped:
+            self.stats.wheel_clips += 1
+        if plan.clipped and plan.line is not None:
+            axis = self.limits.axes[plan.axis]
+            self.events.append(
+                EngineEvent(
+                    now_s,
+                    "info",
+                    f"handwheel {axis} stopped at the soft limit or a keep-out zone "
+                    f"({axis}={plan.chain.anchor_mm:.4f}); the detents past it were dropped",
+                )
+            )
+
+    def _wheel_room_mm(self, start: Vec, axis: int, sign: int) -> float:
+        """How far a handwheel move may go from start along one axis (inf if nothing stops it)."""
+        unit_vec = tuple(float(sign) if k == axis else 0.0 for k in range(len(start)))
+        inset = self._inset_mm()
+        room_mm = math.inf
+        env = self.limits.envelope
+        if env is not None:
+            lo = tuple(v + inset for v in env.min_mm)
+            hi = tuple(v - inset for v in env.max_mm)
+            room_mm = inc.ray_box_exit(start, unit_vec, lo, hi)[0]
+        for zone in self.limits.keepouts:
+            t_in = inc.ray_box_entry(start, unit_vec, zone.min_mm, zone.max_mm)[0]
+            room_mm = min(room_mm, max(t_in - inset, 0.0))
+        return room_mm
 
     def _step_line(self, step: StepIntent | GotoIntent) -> tuple[str, PathSeg] | None:
         start = self._track.end_mm
@@ -859,6 +1104,7 @@ class Jogger:
     def _settle(self, now_s: float) -> None:
         """The queue was sent whole: wait for the machine to report rest."""
         self.phase = Phase.SETTLING
+        self._settle_resumable = True
         self._fresh_status_wanted = True
 
     def _advance_stop(self, now_s: float, out: list[Output]) -> None:
@@ -910,6 +1156,13 @@ class Jogger:
         self._commanded = inc.VectorMove((0.0,) * len(self.limits.axes), 0.0, 1.0)
         self._stop.end()
         self.phase = Phase.IDLE
+        wheel_runs = [r for r in self._steps if isinstance(r, _WheelRun)]
+        if not wheel_runs:
+            self._wheel_dir = None
+        for run in wheel_runs:
+            # Detents queued behind this stop (a velocity reversal) waited for the engine, not
+            # for a still wheel: their timeout runs from now.
+            run.last_s = max(run.last_s, now_s)
 
     def _abandon_motion(self) -> None:
         """Forget the queued path (door, hold, alarm, reset): nothing more is sent.
@@ -921,6 +1174,7 @@ class Jogger:
         self._cancel_owed = self._jogs_unanswered()
         self._track.drop()
         self._steps.clear()
+        self._wheel_dir = None
         self._intent = None
         self._acted_intent = None
         self._stop.end()
@@ -965,6 +1219,10 @@ class Jogger:
                 dt = now_s - self._last_report[0]
                 self._actual_speed_mm_s = math.dist(mpos, self._last_report[1]) / dt
             self._last_report = (now_s, tuple(mpos))
+            # The correction places the estimate at now_s: advance it there first, or the next
+            # update would integrate the time since the last poll a second time (the estimate
+            # ran ~4 ms ahead of the machine, which a velocity-mode wheel's lead bound felt).
+            self._track.update_estimate(now_s)
             off_path = self._track.correct_estimate(
                 mpos, (len(report.raw) + 2) * self.tuning.byte_s
             )
@@ -986,6 +1244,7 @@ class Jogger:
             self._steps.clear()
             self._stop.end()  # a handshake under way is dropped: the queue runs out instead
             self.phase = Phase.SETTLING
+            self._settle_resumable = False  # nothing more is sent until the machine rests
             self._fresh_status_wanted = True
             return
         if self._pending_desync:
