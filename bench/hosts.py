@@ -64,8 +64,9 @@ class _Host:
         self.on_line_reply(entry.text, resp, now_s)
         return True
 
-    def on_response(self, resp: Response, now_s: float) -> None:
-        """Other lines: the host has folded them into the model already."""
+    def on_response(self, resp: Response, now_s: float) -> bool:
+        """Other lines: the host has folded them into the model already; poll at once."""
+        return True
 
     def poll(self, now_s: float) -> list[Output]:
         """Give the method a chance to act, then hand over what it queued."""

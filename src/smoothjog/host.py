@@ -56,8 +56,8 @@ class JogEngine(Protocol):
     def on_reply(self, entry: Entry, resp: Ok | ErrorReply, now_s: float) -> bool:
         """The reply to one of the engine's own lines; True to be polled at once."""
 
-    def on_response(self, resp: Response, now_s: float) -> None:
-        """Any other line from the controller (already folded into the model)."""
+    def on_response(self, resp: Response, now_s: float) -> bool:
+        """Any other line from the controller (already in the model); True to be polled now."""
 
     def poll(self, now_s: float) -> list[Output]:
         """What to send now; lines are already recorded in the ledger."""
@@ -389,8 +389,8 @@ class Host:
                 _fail_console_entries(dropped)
                 assert self._room is not None
                 self._room.set()
-            if driver is not None:
-                driver.on_response(resp, now_s)
+            if driver is not None and not driver.on_response(resp, now_s):
+                poke = False  # a routine report: the engine's own deadline comes soon enough
             if port is not None:
                 port.queue.put_nowait(raw)
             if isinstance(resp, Banner) and driver is not None and port is None:

@@ -91,6 +91,9 @@ MIN_FEED_MM_S = 1.0 / 60.0
 #: A queue within this of its target is topped up: the wake-up computed for the instant the
 #: queue reaches its target must send then, not find a rounding error's worth still queued.
 QUEUE_TOLERANCE_MM = 1e-6
+#: A report that puts the machine at most this far ahead of the estimate needs no poll of its
+#: own: at full speed it is well under a millisecond of queue (the link margin covers more).
+ROUTINE_LEAD_MM = 0.05
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 32
 
@@ -392,6 +395,8 @@ class Jogger:
         self._actual_speed_mm_s = 0.0
         #: When the streaming queue needs its next top-up (None: a reply will say).
         self._wake_at_s: float | None = None
+        #: Something reached the engine (an intent, a line, new limits) since its last poll.
+        self._changed = True
         #: The last poll held a line back for want of room in the controller's RX buffer.
         self._rx_blocked = False
         self._commanded = inc.VectorMove((0.0,) * len(limits.axes), 0.0, 1.0)
@@ -404,6 +409,7 @@ class Jogger:
     @limits.setter
     def limits(self, limits: EngineLimits) -> None:
         self._limits = limits
+        self._changed = True
         self._track.use_machine(
             limits.steps_per_mm, limits.accel_mm_s2, limits.junction_deviation_mm
         )
@@ -414,6 +420,7 @@ class Jogger:
 
         Steps, go-tos and handwheel detents queue in order behind each other.
         """
+        self._changed = True
         if isinstance(intent, StepIntent | GotoIntent):
             self._validate(intent)
             self._steps.append(intent)  # steps queue in order; a held stick is released
@@ -528,6 +535,7 @@ class Jogger:
 
     def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
         """Per-axis speed ratios in (0, 1]."""
+        self._changed = True
         for axis, r in ratios.items():
             if axis not in self.limits.axes:
                 raise JogBuildError(f"speed ratio for unknown axis {axis!r}")
@@ -544,6 +552,7 @@ class Jogger:
         distance, not in lines), so the host need not poll for it: half the wake-ups of a
         held jog (about 95 a second at full speed) are saved that way.
         """
+        self._changed = True
         if not self._pending or self._pending[0] is not entry:
             # Grbl answers in order, so the engine's oldest line is the one answered; anything
             # else means the ledger was reset under us. Never act on a reply we cannot place.
@@ -565,11 +574,26 @@ class Jogger:
         )
         return not routine
 
-    def on_response(self, resp: Response, now_s: float) -> None:
-        """Any other line the controller sent (the host has folded it into the model)."""
+    def on_response(self, resp: Response, now_s: float) -> bool:
+        """Any other line the controller sent (the host has folded it into the model).
+
+        Returns whether the engine has anything to do at once. A status report that finds a
+        held jog running where the estimate expected it (or behind it, which only makes the
+        queue longer than assumed) changes nothing the next planned poll would not see.
+        """
+        self._changed = True
         if isinstance(resp, StatusReport):
-            self._on_status(resp, now_s)
-        elif isinstance(resp, AlarmReply):
+            fault = self._fault
+            lead_mm = self._on_status(resp, now_s)
+            return not (
+                self.phase is Phase.JOGGING
+                and self._wake_at_s is not None  # a planned top-up will poll soon
+                and resp.state == "Jog"
+                and lead_mm <= ROUTINE_LEAD_MM
+                and not self._pending_desync
+                and self._fault is fault
+            )
+        if isinstance(resp, AlarmReply):
             info = alarm_info(resp.code)
             self._fault_now(now_s, f"ALARM:{resp.code} {info.meaning}", info.hint)
             self._abandon_motion()
@@ -586,6 +610,7 @@ class Jogger:
             # The door already cancels the jog; send nothing more (lines in the controller's
             # buffer would run after the resume) and cancel those still unanswered then.
             self._abandon_motion()
+        return True
 
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset)."""
@@ -597,6 +622,18 @@ class Jogger:
     def poll(self, now_s: float) -> list[Output]:
         """Everything to send now; call on every reply and at least every next_deadline_s()."""
         out: list[Output] = []
+        if (
+            not self._changed
+            and self.phase is Phase.JOGGING
+            and self._wake_at_s is not None
+            and now_s < self._wake_at_s
+        ):
+            # Hot path: nothing was heard or asked since the last poll and the queue is not due
+            # for a top-up (the machine cannot drain it faster than its wake-up assumed), so
+            # only a status query can be owed; a held jog comes here some 20 times a second.
+            self._poll_status(now_s, out)
+            return out
+        self._changed = False
         self._wake_at_s = None
         self._rx_blocked = False
         self._track.update_estimate(now_s)
@@ -1210,10 +1247,12 @@ class Jogger:
         if self.phase in (Phase.JOGGING, Phase.STEPPING, Phase.SETTLING):
             self._begin_stop(now_s)
 
-    def _on_status(self, report: StatusReport, now_s: float) -> None:
+    def _on_status(self, report: StatusReport, now_s: float) -> float:
+        """Take a status report; return how far it moved the estimate forward (mm)."""
         self._status_asked_s = None
         state = report.state
         mpos = self.model.mpos_mm
+        lead_mm = 0.0
         if mpos is not None:
             if self._last_report is not None and now_s > self._last_report[0]:
                 dt = now_s - self._last_report[0]
@@ -1223,9 +1262,11 @@ class Jogger:
             # update would integrate the time since the last poll a second time (the estimate
             # ran ~4 ms ahead of the machine, which a velocity-mode wheel's lead bound felt).
             self._track.update_estimate(now_s)
+            predicted_mm = self._track.x_est_mm
             off_path = self._track.correct_estimate(
                 mpos, (len(report.raw) + 2) * self.tuning.byte_s
             )
+            lead_mm = self._track.x_est_mm - predicted_mm
             if off_path and self.phase is Phase.JOGGING:
                 # The machine is off every jog we sent: something moved or stopped it outside
                 # smoothjog (a feed hold, a cancel, another sender), and Grbl re-synced its G91
@@ -1246,7 +1287,7 @@ class Jogger:
             self.phase = Phase.SETTLING
             self._settle_resumable = False  # nothing more is sent until the machine rests
             self._fresh_status_wanted = True
-            return
+            return lead_mm
         if self._pending_desync:
             self._pending_desync = False
             if self.phase is Phase.JOGGING:
@@ -1258,7 +1299,7 @@ class Jogger:
                 self._intent = None
                 self._acted_intent = None
                 self._begin_stop(now_s)
-                return
+                return lead_mm
         if (
             report.pins
             and ("H" in report.pins or "D" in report.pins)
@@ -1276,7 +1317,7 @@ class Jogger:
                 "release it, resume with ~, and jog again",
             )
             self._abandon_motion()
-            return
+            return lead_mm
         if (
             state == "Idle"
             and self.phase is Phase.JOGGING
@@ -1315,7 +1356,7 @@ class Jogger:
             if self.phase is not Phase.IDLE:
                 self._fault_now(now_s, f"jogging stopped: {_STATE_REASONS.get(state, state)}", "")
                 self._abandon_motion()
-            return
+            return lead_mm
         if state == "Idle" and fresh:
             if self.phase is Phase.STOPPING and self._stop.phase is StopPhase.WAIT_STATUS:
                 self._fresh_status_wanted = False
@@ -1326,6 +1367,7 @@ class Jogger:
                 # The queue ran out by itself: no cancel to report, even if one was under way.
                 self._fresh_status_wanted = False
                 self._finish_stop(now_s, cancelled=False, recancels=0)
+        return lead_mm
 
     def _status_urgent(self) -> bool:
         """A report is needed now: to end a stop, or a queue the estimate says has run out."""
