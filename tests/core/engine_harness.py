@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from smoothjog.core.intents import Intent
 from smoothjog.core.jogger import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.ledger import ENGINE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
+from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, parse_response
 
 #: The simple machine: 80 steps/mm, 5000 mm/min, 500 mm/s², 800 mm of travel on every axis.
@@ -261,3 +262,52 @@ class EngineHarness:
     def event_kinds(self) -> list[str]:
         """The kind of every event so far."""
         return [e.kind for e in self.engine.events]
+
+
+# ------------------------------------------------------------------------------ script steps
+#: One step of a scripted engine test: something done to (or checked on) the harness.
+Step = Callable[[EngineHarness], None]
+
+
+def kinds(outputs: Sequence[Output]) -> list[str]:
+    """Outputs in short: `$J` for any jog line, the other lines verbatim, `0x85`, `?`."""
+    out = []
+    for o in outputs:
+        if isinstance(o, SendLine):
+            out.append("$J" if o.text.startswith("$J=") else o.text)
+        else:
+            out.append({JOG_CANCEL: "0x85", STATUS_QUERY: "?"}.get(o.byte, repr(o.byte)))
+    return out
+
+
+def intent(i: Intent) -> Step:
+    return lambda h: h.intent(i)
+
+
+def sends(*expected: str) -> Step:
+    """Poll once and check exactly what the engine sent (see kinds)."""
+
+    def step(h: EngineHarness) -> None:
+        got = kinds(h.poll())
+        assert got == list(expected), f"at t={h.t:.3f} s the engine sent {got}"
+
+    return step
+
+
+def poll(h: EngineHarness) -> None:
+    h.poll()
+
+
+def ok(h: EngineHarness) -> None:
+    h.ok()
+
+
+def ok_all(h: EngineHarness) -> None:
+    h.ok_all()
+
+
+def wait(dt_s: float) -> Step:
+    def step(h: EngineHarness) -> None:
+        h.advance(dt_s)
+
+    return step

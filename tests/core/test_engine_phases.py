@@ -20,10 +20,9 @@ from smoothjog.core import increments as inc
 from smoothjog.core.errors import JogBuildError
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineLimits, JogTuning, Output, Phase, SendLine
+from smoothjog.core.jogger import EngineLimits, JogTuning, Phase, SendLine
 from smoothjog.core.ledger import ENGINE, Entry
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import Ok, parse_response
 from smoothjog.core.stopper import MAX_RECANCELS
 from tests.core.engine_harness import (
@@ -33,28 +32,22 @@ from tests.core.engine_harness import (
     START_MPOS,
     STEPS_PER_MM,
     EngineHarness,
+    Step,
     handshake_lines,
+    intent,
     jog_target,
+    kinds,
+    ok,
+    ok_all,
+    poll,
+    sends,
+    wait,
 )
 
-Step = Callable[[EngineHarness], None]
 Where = Sequence[float] | Callable[[EngineHarness], Sequence[float]]
 
 
 # ------------------------------------------------------------------------------ script steps
-def kinds(outputs: Sequence[Output]) -> list[str]:
-    """Outputs in short: `$J` for any jog line, the other lines verbatim, `0x85`, `?`."""
-    out = []
-    for o in outputs:
-        if isinstance(o, SendLine):
-            out.append("$J" if o.text.startswith("$J=") else o.text)
-        else:
-            out.append({JOG_CANCEL: "0x85", STATUS_QUERY: "?"}.get(o.byte, repr(o.byte)))
-    return out
-
-
-def intent(i: Intent) -> Step:
-    return lambda h: h.intent(i)
 
 
 def jog(axes: dict[str, float] | None = None, speed: float = 1.0) -> Step:
@@ -65,20 +58,6 @@ NEUTRAL = jog({"X": 0.0})
 STOP = intent(StopIntent())
 
 
-def poll(h: EngineHarness) -> None:
-    h.poll()
-
-
-def sends(*expected: str) -> Step:
-    """Poll once and check exactly what the engine sent (see kinds)."""
-
-    def step(h: EngineHarness) -> None:
-        got = kinds(h.poll())
-        assert got == list(expected), f"at t={h.t:.3f} s the engine sent {got}"
-
-    return step
-
-
 def sends_jogs(h: EngineHarness) -> None:
     """Poll once: the engine sends several jog lines (how many depends on its tuning) and `?`."""
     got = kinds(h.poll())
@@ -86,24 +65,9 @@ def sends_jogs(h: EngineHarness) -> None:
     assert set(got) <= {"$J", "?"}, got
 
 
-def wait(dt_s: float) -> Step:
-    def step(h: EngineHarness) -> None:
-        h.advance(dt_s)
-
-    return step
-
-
 def stream(dt_s: float) -> Step:
     """Jog on for dt_s: every line answered one 2 ms tick after it was sent."""
     return lambda h: h.run(h.t + dt_s)
-
-
-def ok(h: EngineHarness) -> None:
-    h.ok()
-
-
-def ok_all(h: EngineHarness) -> None:
-    h.ok_all()
 
 
 def ok_but_one(h: EngineHarness) -> None:

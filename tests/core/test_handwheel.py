@@ -9,7 +9,7 @@ machine (11.11 mm at full feed, less half a step for the rounding to the grid: 1
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -19,33 +19,28 @@ from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import (
     ContinuousIntent,
     HandwheelIntent,
-    Intent,
     StepIntent,
     StopIntent,
 )
-from smoothjog.core.jogger import Output, Phase, SendLine
+from smoothjog.core.jogger import Phase
 from smoothjog.core.machine import KeepOut
-from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
-from tests.core.engine_harness import START_MPOS, STEPS_PER_MM, EngineHarness
+from tests.core.engine_harness import (
+    START_MPOS,
+    STEPS_PER_MM,
+    EngineHarness,
+    Step,
+    intent,
+    ok,
+    ok_all,
+    poll,
+    sends,
+    wait,
+)
 
-Step = Callable[[EngineHarness], None]
 STEP_MM = 1.0 / STEPS_PER_MM
 
 
 # ------------------------------------------------------------------------------ script steps
-def kinds(outputs: Sequence[Output]) -> list[str]:
-    """Outputs in short: `$J` for any jog line, the other lines verbatim, `0x85`, `?`."""
-    out = []
-    for o in outputs:
-        if isinstance(o, SendLine):
-            out.append("$J" if o.text.startswith("$J=") else o.text)
-        else:
-            out.append({JOG_CANCEL: "0x85", STATUS_QUERY: "?"}.get(o.byte, repr(o.byte)))
-    return out
-
-
-def intent(i: Intent) -> Step:
-    return lambda h: h.intent(i)
 
 
 def wheel(
@@ -60,35 +55,6 @@ def wheel(
 def vel(counts: int, step_mm: float = 0.1) -> Step:
     """A velocity-mode report on X."""
     return wheel(counts, step_mm, "velocity")
-
-
-def sends(*expected: str) -> Step:
-    """Poll once and check exactly what the engine sent (see kinds)."""
-
-    def step(h: EngineHarness) -> None:
-        got = kinds(h.poll())
-        assert got == list(expected), f"at t={h.t:.3f} s the engine sent {got}"
-
-    return step
-
-
-def poll(h: EngineHarness) -> None:
-    h.poll()
-
-
-def ok(h: EngineHarness) -> None:
-    h.ok()
-
-
-def ok_all(h: EngineHarness) -> None:
-    h.ok_all()
-
-
-def wait(dt_s: float) -> Step:
-    def step(h: EngineHarness) -> None:
-        h.advance(dt_s)
-
-    return step
 
 
 def stream(dt_s: float) -> Step:
