@@ -14,6 +14,7 @@ loses decimals, never integer digits.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from decimal import ROUND_HALF_EVEN, Decimal
@@ -51,11 +52,14 @@ def _fixed(value: Decimal) -> str:
     return text
 
 
+@functools.lru_cache(maxsize=4096)
 def format_number(value: float, decimals: int) -> str:
     """Write value for Grbl: no exponent, at most `decimals` decimals and 8 digits, never '-0'.
 
     Rounds half to even on the exact binary value. Raises JogBuildError for NaN or infinity, and
-    for a value whose integer part alone needs more than 8 digits.
+    for a value whose integer part alone needs more than 8 digits. Cached (hot path: a held jog
+    writes the same increment and feed about a hundred times a second; 0.0 and -0.0 share an
+    entry, which is right since both are written "0").
     """
     if decimals < 0:
         raise ValueError(f"format_number: decimals must be >= 0, got {decimals}")
