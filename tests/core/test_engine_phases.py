@@ -218,7 +218,7 @@ STOP_ROWS = [
             *STOPPING,
             *[s for _ in range(MAX_RECANCELS) for s in (error(9), sends("0x85", "G4P0"))],
             error(9),
-            sends(),  # the `?` of t=0 is still unanswered: one at a time (firmware-facts §5.2)
+            sends("?"),  # the position is read afresh at once, as after a good sync
             report("Idle"),
         ],
         Expect(
@@ -230,7 +230,7 @@ STOP_ROWS = [
     ),
     row(
         "sync-other-error-fails-at-once",
-        [*STOPPING, error(20), sends(), report("Idle")],
+        [*STOPPING, error(20), sends("?"), report("Idle")],
         Expect(
             Phase.IDLE,
             faults=("stop sync failed: error:20",),

@@ -1175,6 +1175,9 @@ class Jogger:
         self._fault_now(now_s, f"stop sync failed: error:{resp.code}", error_info(resp.code).hint)
         self._stop.sync_failed()
         self._fresh_status_wanted = True
+        # As after a good sync: the position is read with a `?` asked now, not with the answer
+        # to one asked while the machine was still moving (that could wait status_timeout_s).
+        self._status_asked_s = None
 
     def _finish_stop(self, now_s: float, *, cancelled: bool, recancels: int) -> None:
         """The machine rests: record how the stop went and forget the path."""
