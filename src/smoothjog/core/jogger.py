@@ -30,8 +30,6 @@ from smoothjog.core.errors import JogBuildError
 from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD, for_model
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import (
-    STEP_MAX_MM,
-    STEP_MIN_MM,
     ContinuousIntent,
     GotoIntent,
     HandwheelIntent,
@@ -62,26 +60,18 @@ from smoothjog.core.units import (
     norm,
 )
 
-#: The intent names are re-exported: inputs and drivers still import them from here.
+#: The engine's public names; the intent vocabulary lives in core/intents.py.
 __all__ = [
-    "STEP_MAX_MM",
-    "STEP_MIN_MM",
-    "ContinuousIntent",
     "EngineEvent",
     "EngineLimits",
     "EngineStats",
     "EngineView",
-    "GotoIntent",
-    "HandwheelIntent",
-    "Intent",
     "JogTuning",
     "Jogger",
     "Output",
     "Phase",
     "SendLine",
     "SendRealtime",
-    "StepIntent",
-    "StopIntent",
     "StopRecord",
 ]
 
