@@ -14,11 +14,10 @@ from typing import Literal
 from smoothjog.core import increments as inc
 from smoothjog.core.intents import HandwheelIntent
 from smoothjog.core.jogger import JogTuning
-from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import TraceSegment
-from smoothjog.sim.profiles import get_firmware_profile
-from smoothjog.sim.rig import LinkModel, SimRig
 from smoothjog.virtual import VirtualHost
+from tests.test_engine import sent_lines
+from tests.test_engine import session as engine_session
 
 STEPS_PER_MM = 80.0
 V_MM_S = 5000 / 60
@@ -28,20 +27,8 @@ REPORT_S = 0.020  # a pendant's report period while the wheel turns
 
 def session() -> tuple[VirtualHost, list[str]]:
     """A handshaken hobby router, and the list every line the host sends is added to."""
-    vs = VirtualHost(
-        SimRig(GrblFirmware(get_firmware_profile("grbl"), "hobby-router"), LinkModel())
-    )
-    vs.handshake()
-    lines: list[str] = []
-    original = vs.rig.host_send
-
-    def spy(data: bytes, now_s: float) -> float:
-        if data.endswith(b"\n"):
-            lines.append(data.decode().strip())
-        return original(data, now_s)
-
-    vs.rig.host_send = spy  # type: ignore[method-assign]
-    return vs, lines
+    vs = engine_session()
+    return vs, sent_lines(vs)
 
 
 def turn(
