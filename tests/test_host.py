@@ -254,3 +254,60 @@ async def test_a_link_closed_under_the_session_is_surfaced(jogging: bool) -> Non
             with pytest.raises(LinkError) as caught:
                 await session.wait_idle(WAIT_S)
             assert caught.value is error
+
+
+class _PlainLink(SimLink):
+    """A link with only the required contract: no read callback, and every line may wait."""
+
+    def __init__(self, *, stall_every: int = 0) -> None:
+        super().__init__(GrblFirmware(machine="hobby-router"))
+        self.stall_every = stall_every
+        self.wire: list[str] = []
+        self._count = 0
+
+    def subscribe(self, on_line: object, on_end: object) -> bool:
+        return False
+
+    def _write_line_nowait(self, data: bytes) -> bool:
+        self._count += 1
+        if self.stall_every and self._count % self.stall_every == 0:
+            return False  # as a link whose queue is past its high-water mark
+        self.wire.append(data.decode().strip())
+        return super()._write_line_nowait(data)
+
+    async def _write_line(self, data: bytes) -> None:
+        await asyncio.sleep(0.002)  # the wire drains a little later
+        self.wire.append(data.decode().strip())
+        await super()._write_line(data)
+
+
+@pytest.mark.parametrize("stall_every", [0, 7])
+async def test_a_link_without_callbacks_or_room_still_jogs_in_ledger_order(
+    stall_every: int,
+) -> None:
+    """The reader task and the waiting writer: the host jogs and stops, and every line reaches
+    the wire in the order the ledger recorded it (the count of ok's depends on that order)."""
+    link = _PlainLink(stall_every=stall_every)
+    await link.open()
+    session = Host(link, handshake_timeout_s=WAIT_S)
+    recorded: list[str] = []
+    record = session.ledger.record_line
+
+    def spy(owner: str, text: str, now_s: float, tag: object = None) -> object:
+        recorded.append(text)
+        return record(owner, text, now_s, tag)
+
+    session.ledger.record_line = spy  # type: ignore[method-assign,assignment]
+    try:
+        await session.start()
+        assert not session._tasks or session._tasks[0].get_name() == "smoothjog-reader"
+        session.set_intent(ContinuousIntent({"X": -1.0}, 1.0))
+        await eventually(lambda: link.firmware.mpos_mm()[0] < START_MM[0] - 5.0, "moving")
+        session.set_intent(StopIntent())
+        await session.wait_idle(WAIT_S)
+        assert_at_rest_where_tracked(session, link)
+        assert link.wire == recorded
+        if stall_every:
+            assert len(recorded) > stall_every  # the waiting writer really ran
+    finally:
+        await close_within(session)

@@ -1,14 +1,17 @@
 """The one host driver: a link, the line ledger, the machine model, and every owner on the wire.
 
 Everything smoothjog says to a controller goes through one `Host`, in real time or (with the loop
-of vclock.py) in virtual time against the simulator; there is no second driver. Three tasks run:
+of vclock.py) in virtual time against the simulator; there is no second driver. Three things run
+on the event loop:
 
 - the reader: every received line is parsed once, folded into the machine model once, and then
   routed: an `ok`/`error` goes to the owner of the oldest unanswered line (the ledger decides),
-  everything else (status reports, `ALARM`, `[MSG:]`, banners, query output) goes to everyone;
+  everything else (status reports, `ALARM`, `[MSG:]`, banners, query output) goes to everyone.
+  It runs inside the link's read callback (a task only for a link that cannot call back);
 - the ticker: polls the jog engine when something it can see happened (a line arrived, a new
-  intent, its own deadline) and writes what it returns;
-- a re-handshake when a banner says the controller reset mid-session.
+  intent, its own deadline) and writes what it returns. It is a plain callback scheduled with
+  call_soon / call_at, not a task: a held jog wakes it about a hundred times a second;
+- a re-handshake task when a banner says the controller reset mid-session.
 
 Owners other than the engine (the handshake, a user's console, a foreign sender) write through
 `write_line`, which waits for room in the controller's RX buffer; the engine checks the room
@@ -137,7 +140,14 @@ class Host:
         #: Set by abandon(): smoothjog is gone as if its process died; the controller runs on.
         self.abandoned = False
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._wake: asyncio.Event | None = None
+        # The ticker: _tick runs from the loop (call_soon on a poke, call_at at the engine's
+        # deadline), not as a task waiting on an event, which costs two loop passes a wake-up.
+        self._ticking = False
+        self._tick_soon = False
+        self._tick_owed = False  # a writer held the lock: tick when it lets go
+        self._deferred = False  # engine lines wait for the link in a writer task
+        self._timer: asyncio.TimerHandle | None = None
+        self._reading = False
         self._room: asyncio.Event | None = None
         self._write_lock: asyncio.Lock | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -150,12 +160,15 @@ class Host:
 
     # ----------------------------------------------------------------- lifecycle
     async def start(self, *, jog: bool = True) -> MachineModel:
-        """Start the reader, run the connect handshake, then (jog=True) the engine and ticker."""
+        """Start reading, run the connect handshake, then (jog=True) start driving the engine."""
         self._loop = asyncio.get_running_loop()
-        self._wake = asyncio.Event()
         self._room = asyncio.Event()
         self._write_lock = asyncio.Lock()
-        self._tasks.append(asyncio.create_task(self._reader(), name="smoothjog-reader"))
+        self._reading = True
+        # Lines come straight from the link's read callback where it can give them (one task
+        # switch fewer per line); a reader task otherwise.
+        if not self.link.subscribe(self._on_link_line, self._on_link_end):
+            self._tasks.append(asyncio.create_task(self._reader(), name="smoothjog-reader"))
         try:
             await self._handshake()
             if jog:
@@ -165,7 +178,8 @@ class Host:
             await self._cancel_tasks()
             raise
         if jog:
-            self._tasks.append(asyncio.create_task(self._ticker(), name="smoothjog-ticker"))
+            self._ticking = True
+            self._poke()
         return self.model
 
     def _make_engine(self) -> JogEngine:
@@ -186,14 +200,25 @@ class Host:
     def abandon(self) -> None:
         """Stop reading and writing at once, sending nothing (a client that dies mid-jog)."""
         self.abandoned = True
+        self._stop_driving()
         for task in self._all_tasks():
             task.cancel()
+
+    def _stop_driving(self) -> None:
+        """No more ticks and no more lines read (the tasks are cancelled by the caller)."""
+        self._ticking = False
+        self._reading = False
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self.link.unsubscribe()
 
     def _all_tasks(self) -> list[asyncio.Task[None]]:
         extra = [self._rehandshake_task] if self._rehandshake_task is not None else []
         return self._tasks + extra
 
     async def _cancel_tasks(self) -> None:
+        self._stop_driving()
         tasks = self._all_tasks()
         for task in tasks:
             task.cancel()
@@ -231,7 +256,14 @@ class Host:
         async with self._write_lock:
             entry = self.ledger.record_line(owner, text, self.now_s(), tag)
             await self.link.send_line(text)
+        self._after_writer()
         return entry
+
+    def _after_writer(self) -> None:
+        """A writer let go of the lock: run the tick that waited for it."""
+        if self._tick_owed:
+            self._tick_owed = False
+            self._poke()
 
     def send_realtime(self, owner: str, byte: bytes) -> None:
         """Send a realtime byte for owner, ahead of any line the link still holds."""
@@ -325,8 +357,10 @@ class Host:
         return engine
 
     def _poke(self) -> None:
-        if self._wake is not None:
-            self._wake.set()
+        """Tick as soon as the loop is free (once, however many pokes come meanwhile)."""
+        if self._ticking and not self._tick_soon and self._loop is not None:
+            self._tick_soon = True
+            self._loop.call_soon(self._tick)
 
     async def _handshake(self) -> None:
         port = _QueryPort(self)
@@ -338,10 +372,24 @@ class Host:
         self.ledger.capacity_bytes = self.model.rx_buffer_bytes
 
     async def _reader(self) -> None:
+        """For a link that cannot deliver lines by callback."""
         with self._stops_the_host():
             while True:
                 raw = await self.link.read_line()
                 self._on_line(raw, self.now_s())
+
+    def _on_link_line(self, raw: bytes) -> None:
+        """A line from the link's read callback."""
+        if self._reading:
+            with self._stops_the_host():
+                self._on_line(raw, self.now_s())
+
+    def _on_link_end(self, error: LinkError) -> None:
+        """The link is gone (or was closed under the host)."""
+        if self._reading and self.link_error is None:
+            self.link_error = error
+            logger.error("%s", error)
+            self._ended()
 
     @contextlib.contextmanager
     def _stops_the_host(self) -> Iterator[None]:
@@ -440,35 +488,79 @@ class Host:
             self.link_error = LinkError(f"the session stopped: {exc}")
         self._ended()
 
-    async def _ticker(self) -> None:
-        engine = self._engine()
-        loop = self._running_loop()
-        assert self._wake is not None
+    def _tick(self) -> None:
+        """Poll the engine, write what it returns, and arm the timer for its next deadline."""
+        self._tick_soon = False
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if not self._ticking or self.link_error is not None:
+            return
         assert self._write_lock is not None
+        if self._rehandshake_task is not None:
+            self._arm(self.now_s() + 0.01)
+            return
+        if self._write_lock.locked() or self._deferred:
+            # Another owner is between recording its line and writing it: an engine line
+            # written now would reach the wire out of the ledger's order. Tick after it.
+            self._tick_owed = True
+            return
+        engine = self._engine()
         with self._stops_the_host():
-            while self.link_error is None:
-                # Cleared before polling: a wake-up set while the outputs are written is kept.
-                self._wake.clear()
-                now = self.now_s()
-                if self._rehandshake_task is None:
-                    async with self._write_lock:
-                        for output in engine.poll(now):
+            now = self.now_s()
+            outputs = engine.poll(now)
+            if outputs:
+                self._write_now(outputs)
+            self._flush_events()
+            self._arm(engine.next_deadline_s(now))
+
+    def _write_now(self, outputs: Sequence[Output]) -> None:
+        """Hand outputs to the link in order, in one write where the link can batch them."""
+        self.link.cork()
+        try:
+            for index, output in enumerate(outputs):
+                if isinstance(output, SendLine):
+                    if not self.link.send_line_nowait(output.text):
+                        # The link's own queue is past its high-water mark (a stalled wire):
+                        # write the rest in order once it drains, holding the lock.
+                        self._write_later(outputs[index:])
+                        break
+                else:
+                    self.send_realtime(ENGINE, output.byte)
+        finally:
+            self.link.uncork()
+
+    def _arm(self, deadline_s: float) -> None:
+        if self._ticking and self._loop is not None:
+            self._timer = self._loop.call_at(deadline_s, self._tick)
+
+    def _write_later(self, outputs: Sequence[Output]) -> None:
+        """Write outputs in order, waiting for the link; ticks wait until they are out."""
+        assert self._write_lock is not None
+        lock = self._write_lock
+        self._deferred = True  # until the task holds the lock, nothing else may write
+
+        async def write() -> None:
+            try:
+                async with lock:
+                    with self._stops_the_host():
+                        for output in outputs:
                             if isinstance(output, SendLine):
                                 await self.link.send_line(output.text)
                             else:
                                 self.send_realtime(ENGINE, output.byte)
-                    self._flush_events()
-                    deadline = engine.next_deadline_s(now)
-                else:
-                    deadline = now + 0.01
-                # A timer that sets the wake-up event, not asyncio.timeout: a timeout that
-                # expires raises and catches an exception on every top-up of a held jog (about
-                # a hundred a second), which costs more CPU than the engine's whole poll.
-                timer = loop.call_at(deadline, self._wake.set)
-                try:
-                    await self._wake.wait()
-                finally:
-                    timer.cancel()
+            finally:
+                self._deferred = False
+            self._tick_owed = True
+            self._after_writer()
+
+        task = asyncio.get_running_loop().create_task(write(), name="smoothjog-writer")
+        self._tasks.append(task)
+        task.add_done_callback(self._forget_task)
+
+    def _forget_task(self, task: asyncio.Task[None]) -> None:
+        if task in self._tasks:
+            self._tasks.remove(task)
 
     def _flush_events(self) -> None:
         engine = self.engine

@@ -96,6 +96,20 @@ async def test_realtime_byte_overtakes_queued_lines(raw_pty: RawPty) -> None:
     assert received[:position] + received[position + 1 :] == stream
 
 
+async def test_corked_lines_and_bytes_go_out_together_at_uncork(raw_pty: RawPty) -> None:
+    """cork(): nothing is written until uncork(), then all at once, the realtime byte first."""
+    async with SerialLink(raw_pty.path, wait_banner_s=0) as link:
+        link.cork()
+        assert link.send_line_nowait("$J=G91X0.875F5000")
+        link.send_realtime(b"?")
+        await asyncio.sleep(0.05)
+        with pytest.raises(BlockingIOError):
+            os.read(raw_pty.master, 100)
+        link.uncork()
+        expected = b"?$J=G91X0.875F5000\n"
+        assert await raw_pty.read_at_least(len(expected)) == expected
+
+
 async def test_realtime_byte_goes_out_at_once_when_idle(raw_pty: RawPty) -> None:
     """With nothing queued, a realtime byte is written immediately."""
     async with SerialLink(raw_pty.path, wait_banner_s=0) as link:

@@ -57,6 +57,7 @@ class SerialLink(Link):
         # that line.
         self._head_written = 0
         self._writer_armed = False
+        self._corked = False  # a host's tick is queuing several items: write them at uncork()
         self._error: LinkError | None = None
         self.banner_seen = False
 
@@ -113,13 +114,35 @@ class SerialLink(Link):
         await self._out.put(data, self._check_usable)
         self._flush()
 
+    def _write_line_nowait(self, data: bytes) -> bool:
+        """Queue a line and write what the OS accepts now, unless the queue is too long."""
+        if not self._out.put_nowait(data, self._check_usable):
+            return False
+        if not self._corked:
+            self._flush()
+        return True
+
+    def cork(self) -> None:
+        """Queue lines and realtime bytes without writing them until uncork()."""
+        self._corked = True
+
+    def uncork(self) -> None:
+        """Write everything queued since cork() (one system call for a line and its `?`)."""
+        self._corked = False
+        if self._serial is not None and self._error is None:
+            self._flush()
+
+    def _line_inbox(self) -> LineInbox:
+        return self._inbox
+
     def _write_realtime(self, byte: bytes) -> None:
         """Put the byte ahead of every whole queued line, then write."""
         self._check_usable()
         # A line already partly written must finish first: grblHAL drops a half-read line on a
         # jog cancel (firmware-facts §7), which would turn its second half into a garbled new line.
         self._out.insert(1 if self._head_written else 0, byte)
-        self._flush()
+        if not self._corked:
+            self._flush()
 
     def _check_usable(self) -> None:
         """Raise the link's error if it is closed or the device has gone."""

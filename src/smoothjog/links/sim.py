@@ -69,6 +69,15 @@ class SimLink(Link):
         self._check_open()
         self._sim.send(data)
 
+    def _write_line_nowait(self, data: bytes) -> bool:
+        """Put the line on the modelled wire now (it never waits)."""
+        self._check_open()
+        self._sim.send(data)
+        return True
+
+    def _line_inbox(self) -> LineInbox:
+        return self._inbox
+
     def _write_realtime(self, byte: bytes) -> None:
         """Put the byte on the wire now; no line waits in this link, so nothing is overtaken."""
         self._check_open()

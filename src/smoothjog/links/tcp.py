@@ -121,6 +121,16 @@ class TcpLink(Link):
         await self._out.put(data, self._check_usable)
         self._have_data.set()
 
+    def _write_line_nowait(self, data: bytes) -> bool:
+        """Queue a line for the writer task, unless the queue is too long."""
+        if not self._out.put_nowait(data, self._check_usable):
+            return False
+        self._have_data.set()
+        return True
+
+    def _line_inbox(self) -> LineInbox:
+        return self._inbox
+
     def _write_realtime(self, byte: bytes) -> None:
         """Hand the byte to the transport now, ahead of the queued lines."""
         self._check_usable()
