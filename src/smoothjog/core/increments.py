@@ -10,6 +10,7 @@ Every function here is pure arithmetic in mm, mm/s, mm/s² and s.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -84,6 +85,7 @@ def queue_target_mm(speed_mm_s: float, accel_mm_s2: float, ahead_s: float) -> fl
     return stop_distance_mm(speed_mm_s, accel_mm_s2) + speed_mm_s * ahead_s
 
 
+@functools.lru_cache(maxsize=256)  # a held jog asks for the same block length at every poll
 def committed_s(block_s: float, *, segment_s: float = 0.010, segments: int = 5) -> float:
     """Longest time the firmware's prepared segments can cover when every block lasts block_s.
 

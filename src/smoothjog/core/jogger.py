@@ -159,6 +159,10 @@ class JogTuning:
     #: Status polling while moving and while idle (Grbl's docs: 5-10 Hz is comfortable).
     poll_moving_s: float = 0.050
     poll_idle_s: float = 0.250
+    #: A poll that writes a line anyway also sends a `?` due within this time (just over one
+    #: 10.5 ms block), so the status polls of a held jog cost no wake-ups of their own; the
+    #: schedule stays anchored, so reports still come poll_moving_s apart on average.
+    status_early_s: float = 0.015
     #: Planner blocks the engine leaves free so an `ok` is never held back by a full planner.
     planner_reserve_blocks: int = 3
     #: Re-ask for a status report if none came within this time.
@@ -223,6 +227,22 @@ class Phase(Enum):
     STEPPING = "stepping"  # step or go-to jogs queued
     STOPPING = "stopping"  # cancel handshake under way
     SETTLING = "settling"  # waiting for the machine to report rest after the queue ran out
+
+
+@dataclass(eq=False)
+class _Cruise:
+    """One increment repeated while a held jog cruises, and how far its ray is clear."""
+
+    move: inc.VectorMove
+    limits: EngineLimits
+    length_mm: float
+    line: str
+    deltas_mm: Vec
+    seg_len_mm: float
+    unit_vec: Vec
+    clear_mm: float  # along unit_vec from where the run began
+    run_mm: float  # path of the run sent so far
+    next_start_mm: Vec  # where the next repeat must start (the end of the last one sent)
 
 
 @dataclass
@@ -360,6 +380,9 @@ class Jogger:
         self._pending_desync = False
         self._ratios = dict(self.tuning.speed_ratios)
         self._ratios_version = 0
+        #: The increment a cruising jog repeats (None: work the next one out afresh).
+        self._cruise: _Cruise | None = None
+        self._block_cache: tuple[inc.VectorMove, EngineLimits, float] | None = None
         self._velocity_cache: (
             tuple[ContinuousIntent, int, EngineLimits, inc.VectorMove | None] | None
         ) = None
@@ -744,8 +767,11 @@ class Jogger:
         must still satisfy the corrected bound dt >= v/(2a(N-1)) and let the planner hold the
         stopping distance within the blocks the engine allows itself.
         """
+        cache = self._block_cache
+        if cache is not None and cache[0] is move and cache[1] is self.limits:
+            return cache[2]  # a held jog asks for the same move at every poll
         usable = max(self.limits.planner_blocks - self.tuning.planner_reserve_blocks, 2)
-        return max(
+        block_s = max(
             self.tuning.dt_floor_s,
             inc.min_block_s(move.speed_mm_s, move.accel_mm_s2, self.limits.planner_blocks),
             inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2)
@@ -754,6 +780,8 @@ class Jogger:
             # are all rounding (Grbl plans a block under half a step as nothing).
             1.5 * self._step_along_mm(move.unit_vec) / move.speed_mm_s,
         )
+        self._block_cache = (move, self.limits, block_s)
+        return block_s
 
     def _step_along_mm(self, unit_vec: Sequence[float]) -> float:
         """Distance along unit_vec in which the busiest axis makes one step."""
@@ -825,39 +853,105 @@ class Jogger:
         """Send one G91 increment along move (clipped to the envelope and keep-outs)."""
         start = self._track.end_mm
         assert start is not None
-        clipped = self._clip(start, move, length_mm)
-        if clipped is None:
-            return False
-        move, length_mm = clipped
-        deltas: dict[str, float] = {}
-        for axis, u in zip(self.limits.axes, move.unit_vec, strict=True):
-            d = float(format_number(u * length_mm, MM_DECIMALS))
-            if d != 0.0:
-                deltas[axis] = d
-        if not deltas:
-            return False
-        end = tuple(
-            s + deltas.get(axis, 0.0) for s, axis in zip(start, self.limits.axes, strict=True)
-        )
+        cruise = self._cruise
+        if (
+            cruise is not None
+            and cruise.move is move
+            and cruise.length_mm == length_mm
+            and cruise.limits is self.limits
+            and start == cruise.next_start_mm
+            and cruise.clear_mm >= cruise.run_mm + cruise.seg_len_mm
+        ):
+            # Hot path: the same increment again, along the ray whose clear distance was
+            # worked out when this run began (every start of the run lies on that ray).
+            line, deltas, seg_len = cruise.line, cruise.deltas_mm, cruise.seg_len_mm
+            run_mm = cruise.run_mm + seg_len
+        else:
+            made = self._make_increment(start, move, length_mm)
+            if made is None:
+                return False
+            line, deltas, seg_len, cruise = made
+            run_mm = seg_len
+        end = tuple(s + d for s, d in zip(start, deltas, strict=True))
         if not self._fits_envelope(end):
             return False
-        line = build_jog_line(
-            moves=deltas,
-            feed_mm_min=round(mm_s_to_mm_min(move.speed_mm_s), 3),
-            mode="G91",
-            axes=self.limits.axes,
-            max_line_chars=self.limits.max_line_chars,
-        )
         if not self._fits_rx(line):
             self._rx_blocked = True
             return False
-        seg_len = norm(tuple(e - s for e, s in zip(end, start, strict=True)))
+        if cruise is not None:
+            cruise.run_mm = run_mm
+            cruise.next_start_mm = end
+        self._cruise = cruise
         seg = PathSeg(
-            start, end, seg_len, move.speed_mm_s, move.accel_mm_s2, self._track.length_mm()
+            start,
+            end,
+            seg_len,
+            move.speed_mm_s,
+            move.accel_mm_s2,
+            self._track.length_mm(),
+            unit_vec=cruise.unit_vec if cruise is not None else None,
         )
         self._track.append(seg)
         self._send(line, "jog", now_s, out, seg)
         return True
+
+    def _make_increment(
+        self, start: Vec, move: inc.VectorMove, length_mm: float
+    ) -> tuple[str, Vec, float, _Cruise | None] | None:
+        """Clip, round and write one increment; the cruise to repeat it, when it may be."""
+        clipped = self._clip(start, move, length_mm)
+        if clipped is None:
+            return None
+        clipped_move, clipped_mm = clipped
+        deltas: dict[str, float] = {}
+        for axis, u in zip(self.limits.axes, clipped_move.unit_vec, strict=True):
+            d = float(format_number(u * clipped_mm, MM_DECIMALS))
+            if d != 0.0:
+                deltas[axis] = d
+        if not deltas:
+            return None
+        line = build_jog_line(
+            moves=deltas,
+            feed_mm_min=round(mm_s_to_mm_min(clipped_move.speed_mm_s), 3),
+            mode="G91",
+            axes=self.limits.axes,
+            max_line_chars=self.limits.max_line_chars,
+        )
+        delta_vec = tuple(deltas.get(axis, 0.0) for axis in self.limits.axes)
+        seg_len = norm(delta_vec)
+        if clipped_move is not move or clipped_mm != length_mm or seg_len <= 0.0:
+            return line, delta_vec, seg_len, None  # near an edge: worked out afresh each time
+        # The rounded increment's own direction: start + k * delta stays exactly on this ray,
+        # so its clear distance holds for every repeat (the unrounded direction would drift).
+        ray = tuple(d / seg_len for d in delta_vec)
+        cruise = _Cruise(
+            move=move,
+            limits=self.limits,
+            length_mm=length_mm,
+            line=line,
+            deltas_mm=delta_vec,
+            seg_len_mm=seg_len,
+            unit_vec=ray,
+            clear_mm=self._clear_mm(start, ray),
+            run_mm=0.0,
+            next_start_mm=start,
+        )
+        return line, delta_vec, seg_len, cruise
+
+    def _clear_mm(self, start: Vec, ray: Vec) -> float:
+        """How far from start along ray the machine stays inside the inset envelope and clear of
+        every inset keep-out (what _clip would allow an increment of any length)."""
+        inset = self._inset_mm()
+        clear = math.inf
+        env = self.limits.envelope
+        if env is not None:
+            lo = tuple(v + inset for v in env.min_mm)
+            hi = tuple(v - inset for v in env.max_mm)
+            clear = inc.ray_box_exit(start, ray, lo, hi)[0]
+        for zone in self.limits.keepouts:
+            t_in = inc.ray_box_entry(start, ray, zone.min_mm, zone.max_mm)[0]
+            clear = min(clear, max(t_in - inset, 0.0))
+        return clear
 
     def _clip(
         self, start: Vec, move: inc.VectorMove, length_mm: float
@@ -865,8 +959,13 @@ class Jogger:
         """Shorten (or slide) an increment so it stays in the envelope and out of keep-outs."""
         vel = list(move.velocity_mm_s)
         inset = self._inset_mm()
-        for _ in range(len(vel) + 1):
-            m = inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
+        for attempt in range(len(vel) + 1):
+            # The first try is the move itself (it is already capped as Grbl caps it).
+            m = (
+                move
+                if attempt == 0
+                else inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
+            )
             if m is None:
                 return None
             step_mm = self._step_along_mm(m.unit_vec)
@@ -1377,10 +1476,13 @@ class Jogger:
         asked = self._status_asked_s
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
-        if self._status_urgent() or now_s - self._last_status_sent_s >= self._poll_interval_s():
+        due_s = self._last_status_sent_s + self._poll_interval_s()
+        early_s = self.tuning.status_early_s if out else 0.0
+        if self._status_urgent() or now_s >= due_s - early_s:
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s
-            self._last_status_sent_s = now_s
+            # Sent early on a tick that writes anyway: keep the schedule, not the early time.
+            self._last_status_sent_s = due_s if now_s < due_s else now_s
 
     # ----------------------------------------------------------------- lines in flight
     # The engine's lines go into the host's ledger, which counts every owner's bytes against

@@ -34,6 +34,8 @@ class PathSeg:
     x0_mm: float  # distance along the path where this jog starts
     acked: bool = False
     entry_cap_mm_s: float = 0.0  # fastest the planner lets the machine enter it (junction)
+    #: Its direction, when the sender already knows it (else worked out from start and end).
+    unit_vec: Vec | None = None
 
 
 class PathTracker:
@@ -90,9 +92,13 @@ class PathTracker:
         """Add a sent jog to the path, with the speed the planner allows at its start."""
         if self.path:
             prev = self.path[-1]
-            seg.entry_cap_mm_s = min(
-                seg.speed_mm_s, prev.speed_mm_s, self.junction_speed_mm_s(prev, seg)
-            )
+            if seg.unit_vec is not None and seg.unit_vec is prev.unit_vec:
+                # A repeat of the same increment: straight on, no junction limit.
+                seg.entry_cap_mm_s = min(seg.speed_mm_s, prev.speed_mm_s)
+            else:
+                seg.entry_cap_mm_s = min(
+                    seg.speed_mm_s, prev.speed_mm_s, self.junction_speed_mm_s(prev, seg)
+                )
         self.path.append(seg)
         self.end_mm = seg.end_mm
 
