@@ -335,9 +335,9 @@ def test_replies_to_jog_lines(harness: dict[str, Any], script: list[Step], expec
 
 
 RACE = "the controller ran a jog block in Run state (a Grbl race)"
-HOLD_INPUT = "the controller's feed-hold or door input is active"
+HOLD_INPUT = "input was pressed: the controller is stopping"
 OUTSIDE = "the jog was stopped outside smoothjog"
-LEFT_PATH = "the machine left the path smoothjog sent"
+LEFT_PATH = "it left the path smoothjog sent"
 STEPPING = [intent(StepIntent("X", -1.0)), intent(StepIntent("X", -1.0)), sends("$J", "$J", "?")]
 
 STATUS_ROWS = [
@@ -399,7 +399,19 @@ STATUS_ROWS = [
     row(
         "hold-input-while-idle-is-no-fault",
         [report("Idle", pn="H"), sends("?")],
-        Expect(Phase.IDLE),
+        Expect(Phase.IDLE, never=("fault",)),
+    ),
+    row(
+        "hold-input-active-since-rest-still-jogs",
+        # Grbl acts on a change of the input, not its level (a floating or inverted pin):
+        # the pin that read active at rest is no press, so the jog runs on.
+        [report("Idle", pn="PH"), *JOGGING, ok, report("Jog", pn="PH"), phase_is(Phase.JOGGING)],
+        Expect(Phase.JOGGING, never=("fault",)),
+    ),
+    row(
+        "door-input-pressed-beside-a-stuck-hold-input-abandons",
+        [report("Idle", pn="H"), *JOGGING, ok, report("Jog", pn="HD"), phase_is(Phase.IDLE)],
+        Expect(Phase.IDLE, faults=("door input was pressed",), never=()),
     ),
     row(
         "idle-short-of-the-path-while-jogging",

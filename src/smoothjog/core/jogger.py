@@ -76,6 +76,8 @@ __all__ = [
 ]
 
 SYNC_LINE = "G4P0"
+#: The control inputs a status report's Pn field names (firmware-facts §5.4).
+_PIN_NAMES = {"H": "feed-hold", "D": "door"}
 #: Grbl's slowest feed (MINIMUM_FEED_RATE, 1 mm/min, firmware-facts §4.2), in mm/s.
 MIN_FEED_MM_S = 1.0 / 60.0
 #: A queue within this of its target is topped up: the wake-up computed for the instant the
@@ -84,6 +86,10 @@ QUEUE_TOLERANCE_MM = 1e-6
 #: A report that puts the machine at most this far ahead of the estimate needs no poll of its
 #: own: at full speed it is well under a millisecond of queue (the link margin covers more).
 ROUTINE_LEAD_MM = 0.05
+#: A report that puts the machine this much further behind the estimate than its age can
+#: explain means it is not running what was sent (an outside feed hold or cancel): the
+#: estimate follows the firmware's planner to well under this at every stop (bench tables).
+OUTSIDE_LAG_MM = 0.75
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 32
 
@@ -378,6 +384,13 @@ class Jogger:
         self._stop_requested = False
         self._cancel_owed = False
         self._pending_desync = False
+        #: Stopped from outside: continuous intents are ignored until the stick is released.
+        self._await_press = False
+        #: The commanded move a Jog report last showed running at its speed.
+        self._seen_at_speed: inc.VectorMove | None = None
+        #: Pn letters seen while the machine rested (an input that reads active while Idle).
+        self._rest_pins = ""
+        self._pins_warned = ""
         self._ratios = dict(self.tuning.speed_ratios)
         self._ratios_version = 0
         #: The increment a cruising jog repeats (None: work the next one out afresh).
@@ -438,6 +451,7 @@ class Jogger:
             self._validate(intent)
             self._steps.append(intent)  # steps queue in order; a held stick is released
             self._intent = None
+            self._await_press = False  # a step is a press of its own
             return
         if isinstance(intent, HandwheelIntent):
             self._validate(intent)
@@ -449,9 +463,14 @@ class Jogger:
             self._intent = None
             self._steps.clear()
             self._stop_requested = True
+            self._await_press = False
             return
         # A neutral stick is a stop and is not checked further (an unknown axis at 0 is fine).
         self._validate(intent)
+        if self._await_press:
+            # Someone else stopped this jog: the stick still held (or re-sent by its input) is
+            # not a new press, so the machine stays where it was stopped.
+            return
         self._intent = intent
 
     def _take_wheel(self, wheel: HandwheelIntent, now_s: float) -> None:
@@ -1341,10 +1360,12 @@ class Jogger:
 
     def _on_status(self, report: StatusReport, now_s: float) -> float:
         """Take a status report; return how far it moved the estimate forward (mm)."""
+        asked_s = self._status_asked_s
         self._status_asked_s = None
         state = report.state
         mpos = self.model.mpos_mm
         lead_mm = 0.0
+        self._note_pins(report, now_s)
         if mpos is not None:
             if self._last_report is not None and now_s > self._last_report[0]:
                 dt = now_s - self._last_report[0]
@@ -1359,6 +1380,15 @@ class Jogger:
                 mpos, (len(report.raw) + 2) * self.tuning.byte_s
             )
             lead_mm = self._track.x_est_mm - predicted_mm
+            if not off_path and self._lags_outside(report, predicted_mm, asked_s, now_s):
+                # Behind the estimate by more than the report's age explains: the machine is
+                # braking or resting although the queue runs (an outside feed hold or 0x85;
+                # Grbl shows Jog throughout that stop, and may never show Idle before the lines
+                # still in its buffer start it again, firmware-facts §3.1-§3.2).
+                self._outside_stop(
+                    now_s, report, f"it fell {-lead_mm:.2f} mm behind the path it was sent"
+                )
+                return lead_mm
             if off_path and self.phase is Phase.JOGGING:
                 # The machine is off every jog we sent: something moved or stopped it outside
                 # smoothjog (a feed hold, a cancel, another sender), and Grbl re-synced its G91
@@ -1383,32 +1413,20 @@ class Jogger:
         if self._pending_desync:
             self._pending_desync = False
             if self.phase is Phase.JOGGING:
-                self._fault_now(
-                    now_s,
-                    "the machine left the path smoothjog sent (stopped or moved from elsewhere)",
-                    "release the stick and jog again",
-                )
-                self._intent = None
-                self._acted_intent = None
-                self._begin_stop(now_s)
+                self._outside_stop(now_s, report, "it left the path smoothjog sent")
                 return lead_mm
-        if (
-            report.pins
-            and ("H" in report.pins or "D" in report.pins)
-            and self.phase
-            in (
-                Phase.JOGGING,
-                Phase.STEPPING,
-                Phase.SETTLING,
-            )
-        ):
-            # The hold button or the door switch is pressed: the controller is stopping the jog.
+        pressed = self._pressed_inputs(report)
+        if pressed and self.phase in (Phase.JOGGING, Phase.STEPPING, Phase.SETTLING):
+            # The hold button or the door switch went active during the motion: Grbl acts on
+            # that change and is stopping the jog. (One that read active all along is not a
+            # press: Grbl acts on changes only, firmware-facts §5.4, and jogs normally.)
             self._fault_now(
                 now_s,
-                "the controller's feed-hold or door input is active",
-                "release it, resume with ~, and jog again",
+                f"the controller's {pressed} input was pressed: the controller is stopping",
+                "release it, resume with ~ if it holds, and jog again",
             )
             self._abandon_motion()
+            self._await_press = True
             return lead_mm
         if (
             state == "Idle"
@@ -1434,14 +1452,7 @@ class Jogger:
                 # stopped the jog (a feed hold or jog cancel from a button or another client).
                 # Grbl re-synced its parser to where it stopped, so every further G91 increment
                 # would be off: sync, forget the path, and wait for a fresh intent.
-                self._fault_now(
-                    now_s,
-                    "the jog was stopped outside smoothjog (a feed hold or cancel)",
-                    "release the stick and jog again",
-                )
-                self._intent = None
-                self._acted_intent = None
-                self._begin_stop(now_s)
+                self._outside_stop(now_s, report, "it came to rest short of the path's end")
         fresh = self._fresh_status_wanted
         if state not in JOG_STATES and state != "Run":
             self._fresh_status_wanted = False
@@ -1461,6 +1472,91 @@ class Jogger:
                 self._finish_stop(now_s, cancelled=False, recancels=0)
         return lead_mm
 
+    def _lags_outside(
+        self, report: StatusReport, predicted_mm: float, asked_s: float | None, now_s: float
+    ) -> bool:
+        """True when a report shows a jog that ran at speed now braking or at rest for no
+        reason of smoothjog's: an outside feed hold or 0x85 (Grbl reports Jog throughout that
+        stop and may never report Idle before the lines in its buffer start it again,
+        firmware-facts §3.1-§3.2).
+
+        Only a jog already seen at its commanded speed is judged, and only while the planner
+        holds (acknowledged) more than the stopping distance, so braking for the queue's end,
+        a turn, a slow start or a stalled link is never mistaken for it. The lag must exceed
+        what the report's age can explain (it may have been built any time since its `?`).
+        """
+        move = self._commanded
+        if report.state != "Jog" or self.phase is not Phase.JOGGING:
+            self._seen_at_speed = None
+            return False
+        feed = report.feed
+        cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
+        if self._seen_at_speed is not move:
+            if feed is not None and feed >= 0.95 * cmd_mm_min:
+                self._seen_at_speed = move
+            return False
+        if (feed is not None and feed >= 0.9 * cmd_mm_min) or asked_s is None:
+            return False
+        planned = [seg for seg in self._track.path if seg.acked]
+        if not planned:
+            return False
+        planned_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - predicted_mm
+        if planned_ahead_mm < inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2):
+            return False  # the planner may be braking for the end of what it holds
+        lag_mm = predicted_mm - self._track.x_est_mm
+        allowed_mm = self._track.v_est_mm_s * max(now_s - asked_s, 0.0)
+        # The estimate follows short blocks and the end of a queue less closely at speed (the
+        # fuzz showed 0.6-0.7 mm at 20-25 mm/s): allow the larger of OUTSIDE_LAG_MM, two steps
+        # and 15 ms at the commanded speed (1.25 mm at 5000 mm/min).
+        margin_mm = max(
+            OUTSIDE_LAG_MM, 2.0 / min(self.limits.steps_per_mm), move.speed_mm_s * 0.015
+        )
+        return lag_mm > allowed_mm + margin_mm
+
+    def _outside_stop(self, now_s: float, report: StatusReport, how: str) -> None:
+        """Someone else stopped the jog: say so, sync, and wait for a new press."""
+        pins = report.pins or ""
+        if "H" in pins:
+            who = "the controller's feed-hold input"
+        elif "D" in pins:
+            who = "the controller's door input"
+        else:
+            who = "a feed hold or jog cancel from outside smoothjog (a button, another program)"
+        self._fault_now(
+            now_s,
+            f"the jog was stopped outside smoothjog: {how}; stopped by {who}",
+            "release the stick (or key) and press it again to jog on",
+        )
+        self._intent = None
+        self._acted_intent = None
+        self._await_press = True
+        self._begin_stop(now_s)
+
+    def _note_pins(self, report: StatusReport, now_s: float) -> None:
+        """Remember the inputs that read active at rest, and warn once about hold and door."""
+        if report.state != "Idle" or self.phase is not Phase.IDLE:
+            return
+        self._rest_pins = report.pins or ""
+        stuck = "".join(p for p in "HD" if p in self._rest_pins and p not in self._pins_warned)
+        if stuck:
+            self._pins_warned += stuck
+            names = " and ".join(_PIN_NAMES[p] for p in stuck)
+            self.events.append(
+                EngineEvent(
+                    now_s,
+                    "info",
+                    f"the controller reports its {names} input active while Idle"
+                    f" (Pn:{report.pins})",
+                    "Grbl acts only when an input changes, so jogging works; check the wiring"
+                    " or the input's invert setting ($14)",
+                )
+            )
+
+    def _pressed_inputs(self, report: StatusReport) -> str:
+        """Hold or door inputs active now that were not active while the machine rested."""
+        pins = report.pins or ""
+        return " and ".join(_PIN_NAMES[p] for p in "HD" if p in pins and p not in self._rest_pins)
+
     def _status_urgent(self) -> bool:
         """A report is needed now: to end a stop, or a queue the estimate says has run out."""
         return self._fresh_status_wanted and (
@@ -1477,7 +1573,8 @@ class Jogger:
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
         due_s = self._last_status_sent_s + self._poll_interval_s()
-        early_s = self.tuning.status_early_s if out else 0.0
+        # Only while streaming: in a stop the `?` must wait for the moment the stop needs it.
+        early_s = self.tuning.status_early_s if out and self.phase is Phase.JOGGING else 0.0
         if self._status_urgent() or now_s >= due_s - early_s:
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s

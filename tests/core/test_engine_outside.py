@@ -1,0 +1,139 @@
+"""Stops from outside smoothjog: a feed hold or 0x85 from another program, a button, a pin.
+
+Grbl shows `Jog` throughout a jog's hold or cancel and then runs the lines still in its RX buffer
+(firmware-facts §3.1-§3.2), so an Idle report may never be seen. The engine must notice the
+machine falling behind what it was sent, stop, and then not move again until the user presses
+anew, however often the held stick is re-sent. A pin that reads active all along is no press.
+"""
+
+from __future__ import annotations
+
+from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
+from smoothjog.core.jogger import Phase
+from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
+
+HELD = ContinuousIntent({"X": -1.0}, 1.0)
+FEED_MM_MIN = 5000.0
+V_MM_S = FEED_MM_MIN / 60
+
+
+def _estimate_mm(h: EngineHarness, behind_mm: float = 0.0) -> tuple[float, ...]:
+    """Where the engine believes the machine is, less behind_mm along the path."""
+    track = h.engine._track
+    return track.point_at(track.x_est_mm - behind_mm)
+
+
+def _cruising() -> EngineHarness:
+    """A held X- jog at full speed for a second, one report seen at speed, a `?` just sent."""
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    h.run(1.0)
+    h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
+    while h.engine._status_asked_s is None:  # on to the next `?` (it rides on a top-up)
+        h.run(h.t + 0.002)
+    h.advance(0.003)  # its report comes back a round trip later
+    return h
+
+
+def _outside_faults(h: EngineHarness) -> list[str]:
+    return [t for t in h.fault_texts() if "stopped outside smoothjog" in t]
+
+
+def test_a_jog_that_slows_behind_its_path_is_an_outside_stop_and_is_cancelled() -> None:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(3000, 0))
+    assert _outside_faults(h), h.fault_texts()
+    assert "fell 1.9" in _outside_faults(h)[0]  # 2 mm less the report's wire time at speed
+    assert h.engine.phase is Phase.STOPPING
+    h.ok_all()
+    assert kinds(h.poll())[:2] == ["0x85", "G4P0"]
+
+
+def test_a_report_as_late_as_its_query_allows_is_no_outside_stop() -> None:
+    # The report left 0.2 s after its `?` (a stalled link): it may show the machine up to
+    # v x 0.2 s behind the estimate, and still be a faithful report of a running jog.
+    h = _cruising()
+    h.advance(0.2)
+    h.status("Jog", _estimate_mm(h, behind_mm=0.9 * V_MM_S * 0.2), fs=(3000, 0))
+    assert _outside_faults(h) == []
+    assert h.engine.phase is Phase.JOGGING
+
+
+def test_a_slower_report_close_behind_is_no_outside_stop() -> None:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=0.2), fs=(4000, 0))
+    assert h.fault_texts() == []
+
+
+def test_a_jog_never_seen_at_speed_is_not_judged() -> None:
+    # A fresh jog still accelerating (or one that never reaches its speed) lags its estimate.
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    h.run(0.2)
+    h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(2000, 0))
+    assert _outside_faults(h) == []
+
+
+def test_after_an_outside_stop_the_held_stick_does_not_move_the_machine_again() -> None:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0))
+    h.ok_all()
+    h.poll()  # 0x85, G4P0
+    h.ok_all()
+    h.status("Idle", _estimate_mm(h))
+    h.poll()
+    assert h.engine.phase is Phase.IDLE
+    jogs_before = len(h.jog_lines())
+    for _ in range(5):  # the input re-sends the stick it still holds
+        h.intent(HELD)
+        h.run(h.t + 0.1)
+    assert len(h.jog_lines()) == jogs_before
+    assert h.engine.view(h.t).phase == "idle"
+    # Released and pressed again: it jogs.
+    h.intent(StopIntent())
+    h.intent(HELD)
+    h.run(h.t + 0.1)
+    assert len(h.jog_lines()) > jogs_before
+
+
+def test_a_step_after_an_outside_stop_is_a_new_press() -> None:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0))
+    h.ok_all()
+    h.poll()
+    h.ok_all()
+    h.status("Idle", _estimate_mm(h))
+    h.poll()
+    jogs_before = len(h.jog_lines())
+    h.intent(StepIntent("X", -1.0))
+    h.run(h.t + 0.1)
+    assert len(h.jog_lines()) == jogs_before + 1
+
+
+def test_a_hold_input_that_reads_active_at_rest_is_one_warning_and_jogs() -> None:
+    h = EngineHarness()
+    h.status("Idle", START_MPOS, pn="H")
+    h.status("Idle", START_MPOS, pn="H")
+    infos = [e for e in h.engine.events if e.kind == "info"]
+    assert len(infos) == 1
+    assert "feed-hold input active while Idle" in infos[0].text
+    h.intent(HELD)
+    h.run(0.3)
+    h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0), pn="H")
+    h.run(h.t + 0.2)
+    assert h.fault_texts() == []
+    assert h.engine.phase is Phase.JOGGING
+
+
+def test_a_hold_input_pressed_mid_jog_names_the_input() -> None:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0), pn="H")
+    (fault,) = h.fault_texts()
+    assert fault.endswith("stopped by the controller's feed-hold input")
+    h2 = _cruising()
+    h2.status("Jog", _estimate_mm(h2), fs=(FEED_MM_MIN, 0), pn="D")  # pressed, not yet slower
+    assert h2.fault_texts() == [
+        "the controller's door input was pressed: the controller is stopping"
+    ]
