@@ -9,13 +9,20 @@ The model follows the firmware's structure so its flaws come out the same (firmw
   planner slot, a buffer sync or a dwell, and inside the suspend loop (hold, door, jog cancel);
 - the stepper ISR's step-idle delay ($1 ms) freezes the main loop after every cycle stop, and
   once more inside a jog cancel's st_reset (firmware-facts §3.1; the delay itself is from the code);
-- a jog cancel does not flush the RX ring nor the line blocked in mc_line (firmware-facts §3.1).
+- a jog cancel does not flush the RX ring nor the line blocked in mc_line (firmware-facts §3.1);
+  when its stop completes, the code that waited in the checkpoint carries on without another
+  one, so a status request pending then is answered by the next checkpoint the firmware reaches
+  (firmware-facts §3.7);
+- lengths are computed as the firmware computes them, in 32-bit floats and whole steps (f32.py):
+  the parser position, jog targets and the soft-limit test in singles, the machine position in
+  steps, MPos and WPos converted back in singles (firmware-facts §1.5).
 
 Nothing here reads a clock: `receive`, `advance` and the constructor take the time.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections import deque
@@ -40,6 +47,7 @@ from smoothjog.core.codes import (
 )
 from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD, JogClip
 from smoothjog.core.gcode import (
+    TLO_AXIS,
     ExecResult,
     ParserState,
     TravelBox,
@@ -50,7 +58,15 @@ from smoothjog.core.gcode import (
     read_number,
 )
 from smoothjog.core.realtime import EXTENDED_START, Realtime
-from smoothjog.core.units import mm_to_inch
+from smoothjog.core.units import ALL_AXES
+from smoothjog.sim.f32 import (
+    MM_PER_INCH_F32,
+    f32,
+    lround,
+    print_coord,
+    read_float,
+    steps_to_mm,
+)
 from smoothjog.sim.motion import CYCLE_STOP, AxisLimits, Motion, TraceSegment
 from smoothjog.sim.profiles import (
     GRBL,
@@ -59,7 +75,7 @@ from smoothjog.sim.profiles import (
     load_machine_profile,
 )
 from smoothjog.sim.rxbuffer import RxRing, classify
-from smoothjog.sim.settings import Eeprom, GrblSettings, format_grbl_float
+from smoothjog.sim.settings import Eeprom, GrblSettings
 from smoothjog.sim.status import StatusInputs, StatusReporter
 
 Vec = tuple[float, ...]
@@ -217,7 +233,7 @@ class _Home:
     """The homing cycle: runs the moves with no checkpoint except for reset."""
 
     started: bool = False
-    final_mm: Vec = ()
+    final_steps: tuple[int, ...] = ()
 
 
 @dataclass
@@ -304,6 +320,9 @@ class GrblFirmware:
         self._locked = False  # in the critical-alarm loop, waiting for a reset
         self._frozen_until_s = now_s
         self._after_freeze: Callable[[float], None] | None = None
+        # A jog cancel's stop completed inside a checkpoint: the main loop returns to the code
+        # that called it, which goes on without checking again (firmware-facts §3.7).
+        self._resume_past_checkpoint = False
         self._steps: deque[_Step] = deque()
         self._line_buf = bytearray()
         self._held_line: bytes | None = None
@@ -370,6 +389,7 @@ class GrblFirmware:
             and not self.suspend
             and not self._locked
             and self._after_freeze is None
+            and not self._resume_past_checkpoint
             and self._frozen_until_s <= self._now_s
             and not len(self.rx)
             and (self.state != IDLE or self.motion.planner_empty())
@@ -458,14 +478,39 @@ class GrblFirmware:
         return self.state if sub is None else f"{self.state}:{sub}"
 
     def mpos_mm(self) -> Vec:
-        """Machine position from the step counters (what a report shows, in mm)."""
+        """Machine position from the step counters, steps / steps-per-mm in double (exact mm).
+
+        For callers that measure; what the firmware itself computes from the counters (reports,
+        gc_sync_position) is _mpos_single_mm.
+        """
         steps = self.motion.position_steps()
         return tuple(s / self.settings[100 + i] for i, s in enumerate(steps))
 
     def wpos_mm(self) -> Vec:
-        """Work position: MPos minus the work coordinate offset."""
+        """Work position: MPos minus the work coordinate offset (exact mm, as mpos_mm)."""
         wco = self.parser.work_offset_mm
         return tuple(m - w for m, w in zip(self.mpos_mm(), wco, strict=True))
+
+    def _mpos_single_mm(self) -> Vec:
+        """system_convert_array_steps_to_mpos: the step counters in mm, in singles."""
+        return tuple(
+            [
+                steps_to_mm(s, spm)
+                for s, spm in zip(
+                    self.motion.position_steps(), self.motion.steps_per_mm, strict=True
+                )
+            ]
+        )
+
+    def _wco_mm(self) -> Vec:
+        """report_realtime_status's WCO: coord_system + coord_offset (+ TLO on Z), in singles."""
+        p = self.parser
+        wcs = p.coord_systems_mm[p.wcs_index]
+        tlo = f32(p.tool_length_offset_mm)
+        return tuple(
+            f32(f32(f32(c) + f32(g)) + (tlo if i == TLO_AXIS else 0.0))
+            for i, (c, g) in enumerate(zip(wcs, p.g92_offset_mm, strict=True))
+        )
 
     def eeprom(self) -> Eeprom:
         """What this controller would keep over a power cycle."""
@@ -483,12 +528,11 @@ class GrblFirmware:
         """main(): HOMING_INIT_LOCK puts a machine with $22=1 in Alarm at power-up only."""
         if self.machine.start == "homed":
             # Assumption (documented in the profile): start as if `$H` had just completed.
-            pos = self._homed_position_mm()
-            self.motion.set_position_mm(pos)
+            self.motion.set_position_steps(self._homed_position_steps())
             self.state = IDLE
         elif self.settings.int_value(22):
             self.state = ALARM
-        self.parser = self.parser.with_position(self.mpos_mm())
+        self.parser = self.parser.with_position(self._mpos_single_mm())
         self._reinit_delay(now_s)
 
     def _main_loop_start(self, now_s: float) -> None:
@@ -515,6 +559,7 @@ class GrblFirmware:
         self._soft_limit = False
         self._locked = False
         self._after_freeze = None
+        self._resume_past_checkpoint = False
         self._restore_until_s = None
         self._sleep_reported = False
         self._accessories_off = False
@@ -526,7 +571,7 @@ class GrblFirmware:
         self._held_line = None
         self.motion.kill()
         self.motion.set_overrides(100, 100, now_s)  # sys.f_override and r_override back to 100
-        self.parser = self.parser.after_reset().with_position(self.mpos_mm())
+        self.parser = self.parser.after_reset().with_position(self._mpos_single_mm())
         self._reinit_delay(now_s)
 
     def _reinit_delay(self, now_s: float) -> None:
@@ -555,13 +600,13 @@ class GrblFirmware:
                 continue
             res = execute_block(line, self.parser, jog=False, n_axes=self.n_axes)
             if res.ok:
-                self.parser = res.state
+                self.parser = _in_singles(res.state)
                 if res.wco_changed:
                     self.reporter.force_wco()
                 for motion in res.motions:
                     if self.motion.planner_free() > 0:
                         self.motion.plan_line(
-                            motion.target_mm, motion.feed_mm_min, rapid=motion.rapid
+                            _singles(motion.target_mm), motion.feed_mm_min, rapid=motion.rapid
                         )
             reply = "ok" if res.ok else f"error:{res.error}"
             self._emit(now_s, f">{line}:{reply}")
@@ -655,6 +700,7 @@ class GrblFirmware:
             or self.suspend
             or self._locked
             or self._after_freeze is not None
+            or self._resume_past_checkpoint
             or self._frozen_until_s > now_s
         ):
             return False
@@ -758,12 +804,17 @@ class GrblFirmware:
                 return self._homing_step(head, now_s)
         if isinstance(head, _Dwell):
             return self._dwell_step(head, now_s)
-        # Everything else waits inside protocol_execute_realtime: a checkpoint first.
-        changed = self._checkpoint(now_s)
-        if self._taken_over(head, now_s):
-            return True
-        if self.suspend:
-            return changed
+        # Everything else waits inside protocol_execute_realtime: a checkpoint first, unless this
+        # is the return from the checkpoint in which a jog cancel's stop just completed.
+        if self._resume_past_checkpoint:
+            self._resume_past_checkpoint = False
+            changed = True
+        else:
+            changed = self._checkpoint(now_s)
+            if self._taken_over(head, now_s):
+                return True
+            if self.suspend:
+                return changed
         if head is None:
             return self._poll(now_s) or changed
         if isinstance(head, _Plan):
@@ -994,12 +1045,24 @@ class GrblFirmware:
             # and the RX ring are left alone: that is the ghost jog of firmware-facts §3.1.
             self._exec_hold = False
             self.motion.clear_after_stop()
-            self.parser = self.parser.with_position(self.mpos_mm())
+            self.parser = self.parser.with_position(self._mpos_single_mm())
             # st_reset calls st_go_idle once more: a second $1 delay, still in state Jog.
             self._step_idle_delay(now_s)
-            self._after_freeze = self._finish_motion_complete
+            self._after_freeze = self._finish_jog_cancel
             return
         self._finish_motion_complete(now_s)
+
+    def _finish_jog_cancel(self, now_s: float) -> None:
+        """After st_reset's delay: Idle (or Door), and the suspend loop returns to its caller.
+
+        protocol_exec_rt_suspend leaves its loop in the same pass, and the code that called the
+        checkpoint (mc_line, the line reader) goes on at once: mc_line plans the line it held,
+        which jog_execute starts in Jog, before any checkpoint could answer a `?` that came
+        during the delay (firmware-facts §3.7).
+        """
+        self._finish_motion_complete(now_s)
+        if not self.suspend:
+            self._resume_past_checkpoint = True
 
     def _finish_motion_complete(self, now_s: float) -> None:
         """End of a cycle: Idle, or Door when the door opened during a jog cancel."""
@@ -1104,8 +1167,8 @@ class GrblFirmware:
         inputs = StatusInputs(
             state=self.state,
             substate=self._substate(),
-            mpos_mm=self.mpos_mm(),
-            wco_mm=p.work_offset_mm,
+            mpos_mm=self._mpos_single_mm(),
+            wco_mm=self._wco_mm(),
             planner_free=self.motion.planner_free(),
             rx_free=self.rx.free(),
             feed_mm_min=self.motion.realtime_rate_mm_min(),
@@ -1152,10 +1215,15 @@ class GrblFirmware:
         return self._gcode_line(text)
 
     def _envelope(self) -> TravelBox | None:
-        """The soft-limit box when $20=1: -$13x <= target <= 0 on every axis (firmware-facts §2)."""
+        """The soft-limit box when $20=1: -$13x <= target <= 0 on every axis (firmware-facts §2).
+
+        The bounds are singles (settings.max_travel is a float stored negated), so a single
+        target tests as system_check_travel_limits tests it. The sim has no
+        HOMING_FORCE_SET_ORIGIN build, whose box runs 0..+$13x on axes homing to -.
+        """
         if not self.settings.int_value(20):
             return None
-        travel = [self.settings[130 + i] for i in range(self.n_axes)]
+        travel = [f32(self.settings[130 + i]) for i in range(self.n_axes)]
         return TravelBox(tuple(-t for t in travel), tuple(0.0 for _ in travel))
 
     def _gcode_line(self, text: str) -> list[_Step]:
@@ -1171,7 +1239,7 @@ class GrblFirmware:
         if not res.ok:
             return [_Emit(f"error:{res.error}")]
         before = self.parser
-        self.parser = res.state
+        self.parser = _in_singles(res.state)
         stored = (before.coord_systems_mm, before.g28_mm, before.g30_mm)
         if stored != (res.state.coord_systems_mm, res.state.g28_mm, res.state.g30_mm):
             self._eeprom_written()  # G10, G28.1 and G30.1 write EEPROM
@@ -1189,7 +1257,9 @@ class GrblFirmware:
         if res.spindle_changed or res.coolant_changed:
             steps.append(_Call(lambda _t: self.reporter.force_ovr()))
         if not check:
-            steps += [_Plan(m.target_mm, m.feed_mm_min, m.rapid, jog=False) for m in res.motions]
+            steps += [
+                _Plan(_singles(m.target_mm), m.feed_mm_min, m.rapid, jog=False) for m in res.motions
+            ]
         if res.soft_limit_violation:
             steps.append(_SoftLimit())
             return steps
@@ -1209,14 +1279,17 @@ class GrblFirmware:
         res = execute_block(text, self.parser, jog=True, envelope=None, n_axes=self.n_axes)
         if not res.ok or res.motion is None:
             return [_Emit(f"error:{res.error}")]
-        target = res.motion.target_mm
+        # core's parser decides whether the line is valid; the target is recomputed here in the
+        # firmware's single precision, so a G91 stream accumulates as on the chip.
+        target = self._jog_target(text)
         box = self._envelope()
+        # jog_execute -> system_check_travel_limits: single target against single bounds.
         if box is not None and not box.contains(target):
             clip = self.profile.facts.jog_clip
             if clip is JogClip.CLIP_PER_AXIS:
-                target = _clip_per_axis(target, box)
+                target = _singles(_clip_per_axis(target, box))
             elif clip is JogClip.CLIP_IF_40 and self.settings.int_value(40):
-                target = _clip_along_line(self.parser.position_mm, target, box)
+                target = _singles(_clip_along_line(self.parser.position_mm, target, box))
             else:
                 return [_Emit(f"error:{ERR_TRAVEL_EXCEEDED}")]
         # The parser position moves only once mc_line returns (gc_execute_line copies the target
@@ -1224,6 +1297,37 @@ class GrblFirmware:
         # by that jog's target: the ghost jog of firmware-facts §3.1 ends exactly where the queue
         # would.
         return [_Plan(target, res.motion.feed_mm_min, rapid=False, jog=True), _Emit("ok")]
+
+    def _jog_target(self, text: str) -> Vec:
+        """gc_execute_line's target for an accepted `$J=` line, computed in singles.
+
+        The values are read by read_float; G20 multiplies them by MM_PER_INCH; G91 adds the parser
+        position, G90 the work offset (coord system + G92, then TLO on Z), G53 takes them as they
+        are; an axis not named keeps the parser position, and a line with no axis word targets
+        machine zero (STEP 3 [12] and [19], firmware-facts §1.3, §1.5). Each sum is rounded to a
+        single, as storing it in gc_block.values.xyz does.
+        """
+        p = self.parser
+        words = _jog_words(text, self.n_axes)
+        if not words.values:
+            return (0.0,) * self.n_axes
+        inches = p.units == "G20" if words.inches is None else words.inches
+        incremental = p.distance == "G91" if words.incremental is None else words.incremental
+        machine_frame = words.machine_frame
+        wcs = p.coord_systems_mm[p.wcs_index]
+        target = list(p.position_mm)
+        for axis, value in words.values:
+            v = f32(value * MM_PER_INCH_F32) if inches else value
+            if machine_frame:
+                target[axis] = v
+            elif incremental:
+                target[axis] = f32(v + p.position_mm[axis])
+            else:
+                t = f32(v + f32(f32(wcs[axis]) + f32(p.g92_offset_mm[axis])))
+                if axis == TLO_AXIS:
+                    t = f32(t + f32(p.tool_length_offset_mm))
+                target[axis] = t
+        return tuple(target)
 
     def _plan_step(self, step: _Plan, now_s: float) -> bool:
         """mc_line's wait for a free block, then plan_buffer_line (and jog_execute's start)."""
@@ -1387,7 +1491,8 @@ class GrblFirmware:
                 self.startup_lines[slot] = rest
                 self._eeprom_written()
             return [_Emit("ok")]
-        value = read_number(rest, 0)
+        # settings_store_global_setting gets the value as read_float read it: a single.
+        value = read_float(rest, 0)
         if value is None:
             return self._reply(ERR_BAD_NUMBER_FORMAT)
         if value[1] != len(rest) or parameter > 255:
@@ -1406,10 +1511,9 @@ class GrblFirmware:
     def _parameter_lines(self) -> list[str]:
         """`$#`: the stored offsets, G92, TLO and the last probe (never probed: zeros)."""
         inches = bool(self.settings.int_value(13))
-        decimals = 4 if inches else 3
 
         def fmt(v: float) -> str:
-            return format_grbl_float(mm_to_inch(v) if inches else v, decimals)
+            return print_coord(f32(v), inches)
 
         def axes(values: Sequence[float]) -> str:
             return ",".join(fmt(v) for v in values)
@@ -1446,14 +1550,22 @@ class GrblFirmware:
         self.motion.reconfigure(self._axis_limits(), self.settings[11])
 
     # ------------------------------------------------------------------ homing
-    def _homed_position_mm(self) -> Vec:
-        """MPos after homing: -$27 for an axis homing to +, -$13x + $27 for one homing to -."""
-        pull_off = self.settings[27]
+    def _homed_position_steps(self) -> tuple[int, ...]:
+        """sys_position after homing: -$27 for an axis homing to +, -$13x + $27 for one homing to -.
+
+        limits_go_home rounds lround((max_travel + pull-off) x steps/mm), or lround(-pull-off x
+        steps/mm), in singles; max_travel is stored negated.
+        """
+        pull_off = f32(self.settings[27])
         direction_mask = self.settings.int_value(23)
-        return tuple(
-            (-self.settings[130 + i] + pull_off) if direction_mask >> i & 1 else -pull_off
-            for i in range(self.n_axes)
-        )
+        steps = []
+        for i, spm in enumerate(self.motion.steps_per_mm):
+            if direction_mask >> i & 1:
+                corner = f32(-f32(self.settings[130 + i]) + pull_off)
+            else:
+                corner = -pull_off
+            steps.append(lround(f32(corner * spm)))
+        return tuple(steps)
 
     def _homing_step(self, step: _Home, now_s: float) -> bool:
         """`$H`: Z then X/Y seek their switch corner at $25, then pull off at $24 (§2).
@@ -1466,8 +1578,11 @@ class GrblFirmware:
         if not step.started:
             step.started = True
             self.state = HOMING
-            final = self._homed_position_mm()
-            step.final_mm = final
+            step.final_steps = self._homed_position_steps()
+            final = tuple(
+                steps_to_mm(n, spm)
+                for n, spm in zip(step.final_steps, self.motion.steps_per_mm, strict=True)
+            )
             mask = self.settings.int_value(23)
             switch = tuple(
                 -self.settings[130 + i] if mask >> i & 1 else 0.0 for i in range(self.n_axes)
@@ -1496,14 +1611,71 @@ class GrblFirmware:
             return True
         if self.motion.is_running() or not self.motion.planner_empty():
             return False
-        self.motion.set_position_mm(step.final_mm)
-        self.parser = self.parser.with_position(self.mpos_mm())
+        self.motion.set_position_steps(step.final_steps)
+        self.parser = self.parser.with_position(self._mpos_single_mm())
         self._rt &= ~EXEC_CYCLE_STOP
         self._steps.popleft()
         self.state = IDLE
         self._step_idle_delay(now_s)
         self._steps.appendleft(_Call(self._run_startup_lines))
         return True
+
+
+@dataclass(frozen=True)
+class _JogWords:
+    """What an accepted `$J=` line names: units and distance mode (None: modal), G53, axes."""
+
+    inches: bool | None
+    incremental: bool | None
+    machine_frame: bool
+    #: (axis index, value as read_float reads it), in the order of the line.
+    values: tuple[tuple[int, float], ...]
+
+
+@functools.lru_cache(maxsize=256)
+def _jog_words(text: str, n_axes: int) -> _JogWords:
+    """Read the words of an accepted `$J=` line with read_float (only G20/21, G90/91, G53, N, F
+    and axis words can be in one).
+
+    Cached: a held jog sends the same line about a hundred times a second.
+    """
+    letters = ALL_AXES[:n_axes]
+    inches: bool | None = None
+    incremental: bool | None = None
+    machine_frame = False
+    values: dict[int, float] = {}
+    i, end = 3, len(text)  # after "$J="
+    while i < end:
+        letter = text[i]
+        number = read_float(text, i + 1)
+        if number is None:
+            break  # not reached: core's parser accepted the line
+        value, i = number
+        if letter == "G":
+            code = math.trunc(value)
+            if code in (20, 21):
+                inches = code == 20
+            elif code in (90, 91):
+                incremental = code == 91
+            elif code == 53:
+                machine_frame = True
+        elif letter in letters:
+            values[letters.index(letter)] = value
+    return _JogWords(inches, incremental, machine_frame, tuple(values.items()))
+
+
+def _singles(values_mm: Vec) -> Vec:
+    """Each value rounded to a single, as the firmware stores a computed float."""
+    return tuple([f32(v) for v in values_mm])
+
+
+def _in_singles(state: ParserState) -> ParserState:
+    """A state from core's parser (doubles) with its position held as the firmware's singles.
+
+    Approximation: plain G-code targets are computed by core in doubles and only then rounded,
+    so they can be an ulp from the chip's; jog targets are computed in singles (_jog_target).
+    """
+    return state.with_position(_singles(state.position_mm))
 
 
 def _clip_per_axis(target_mm: Vec, box: TravelBox) -> Vec:

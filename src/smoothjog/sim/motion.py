@@ -11,6 +11,11 @@ block's own acceleration, along the queued path.
 Units: distances in mm, speeds in mm/s, accelerations in mm/s², times in s (the caller's clock).
 Grbl stores mm/min and mm/min²; the ratios are the same, so the profiles are too.
 
+Steps are the firmware's: a target becomes whole steps as plan_buffer_line rounds it (lround of
+the single-precision product target x steps/mm, f32.py); the firmware converts step counts back
+to mm in singles itself (firmware.py). The velocity planning and the segment profiles are computed
+in doubles, where Grbl uses singles: that moves times by parts in ten million, never a step.
+
 Deliberate simplifications (documented so no one mistakes them for the firmware):
 - Steps are counted by rounding the exact position along the block, not by a Bresenham DDA; the end
   of every block lands exactly on its target step count, as on the chip.
@@ -28,6 +33,7 @@ from itertools import islice
 
 from smoothjog.core.increments import junction_speed_sqr
 from smoothjog.core.units import limit_by_axis_maximum, mm_min_to_mm_s, mm_s_to_mm_min
+from smoothjog.sim.f32 import f32, mm_to_steps
 
 # Speed: the comments marked "hot path" here and in firmware.py / rig.py are optimisations that
 # keep every result bit for bit (ground-truth traces and the bytes on the wire were compared
@@ -164,9 +170,15 @@ class Motion:
             raise ValueError("the number of axes cannot change")
         self._axes = tuple(axes)
         self._junction_deviation_mm = junction_deviation_mm
-        self._steps_per_mm = tuple(a.steps_per_mm for a in self._axes)
+        # settings.steps_per_mm is a float on the chip: every conversion uses that single.
+        self._steps_per_mm = tuple(f32(a.steps_per_mm) for a in self._axes)
         self._accel = tuple(a.accel_mm_s2 for a in self._axes)
         self._max_rate_mm_s = tuple(mm_min_to_mm_s(a.max_rate_mm_min) for a in self._axes)
+
+    @property
+    def steps_per_mm(self) -> tuple[float, ...]:
+        """Each axis's steps/mm as the firmware holds it (a single)."""
+        return self._steps_per_mm
 
     # ----------------------------------------------------------------- planner
     def planner_free(self) -> int:
@@ -197,7 +209,7 @@ class Motion:
         if len(self._blocks) >= self.planner_blocks:
             raise RuntimeError("plan_line called with the planner full")
         target_steps = tuple(
-            round(t * spm) for t, spm in zip(target_mm, self._steps_per_mm, strict=True)
+            [mm_to_steps(t, spm) for t, spm in zip(target_mm, self._steps_per_mm, strict=True)]
         )
         delta_mm = tuple(
             (t - s) / spm
@@ -368,11 +380,12 @@ class Motion:
         self._machine_steps = self.position_steps()
         self.clear_after_stop()
 
-    def set_position_mm(self, pos_mm: Sequence[float]) -> None:
-        """Set machine and planner position (homing); only while idle."""
-        steps = tuple(round(p * spm) for p, spm in zip(pos_mm, self._steps_per_mm, strict=True))
-        self._machine_steps = steps
-        self._planner_steps = steps
+    def set_position_steps(self, steps: Sequence[int]) -> None:
+        """Set machine and planner step counters (homing sets sys_position); only while idle."""
+        if len(steps) != len(self._axes):
+            raise ValueError(f"position needs {len(self._axes)} axes, got {len(steps)}")
+        self._machine_steps = tuple(steps)
+        self._planner_steps = tuple(steps)
 
     def next_event_s(self) -> float | None:
         """When the executing segment ends (something changes then), or None when idle."""
@@ -493,13 +506,13 @@ class Motion:
         return self._steps_in_block(seg.block, seg.d0_mm + (seg.d1_mm - seg.d0_mm) * frac)
 
     def position_mm(self) -> tuple[float, ...]:
-        """Machine position in mm as Grbl reports it (step counts over steps/mm)."""
+        """Machine position in mm: step counts over steps/mm, in double (ground truth)."""
         return tuple(
             s / spm for s, spm in zip(self.position_steps(), self._steps_per_mm, strict=True)
         )
 
     def planner_position_mm(self) -> tuple[float, ...]:
-        """The end of the last planned block in machine mm."""
+        """The end of the last planned block in machine mm (in double)."""
         return tuple(
             s / spm for s, spm in zip(self._planner_steps, self._steps_per_mm, strict=True)
         )

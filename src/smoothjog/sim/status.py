@@ -1,6 +1,8 @@
 """Build Grbl 1.1h status reports (`<...>`), including the WCO and Ov refresh counters.
 
-Field order, formats and counter rules are those of firmware-facts §5.4 and §5.5.
+Field order, formats and counter rules are those of firmware-facts §5.4 and §5.5. Positions and
+WCO arrive as the firmware's singles; WPos is their difference in single precision and every
+coordinate is printed by printFloat_CoordValue's single arithmetic (f32.py, firmware-facts §1.5).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from smoothjog.core.units import mm_to_inch
+from smoothjog.sim.f32 import f32, print_coord
 from smoothjog.sim.settings import format_grbl_float
 
 #: Reports between WCO fields while busy / otherwise (REPORT_WCO_REFRESH_*_COUNT, firmware-facts
@@ -29,8 +32,8 @@ class StatusInputs:
 
     state: str  # base state name: Idle, Run, Hold, Jog, Home, Alarm, Check, Door, Sleep
     substate: int | None  # Hold:n / Door:n
-    mpos_mm: Sequence[float]
-    wco_mm: Sequence[float]
+    mpos_mm: Sequence[float]  # singles, from the step counters
+    wco_mm: Sequence[float]  # singles
     planner_free: int
     rx_free: int
     feed_mm_min: float
@@ -65,17 +68,14 @@ class StatusReporter:
         busy = inp.state in BUSY_STATES
         name = inp.state if inp.substate is None else f"{inp.state}:{inp.substate}"
         parts = [name]
-        decimals = 4 if inches else 3
 
         def axes(values_mm: Sequence[float]) -> str:
-            return ",".join(
-                format_grbl_float(mm_to_inch(v) if inches else v, decimals) for v in values_mm
-            )
+            return ",".join([print_coord(v, inches) for v in values_mm])
 
         if status_mask & 1:
             parts.append("MPos:" + axes(inp.mpos_mm))
         else:
-            wpos = [m - w for m, w in zip(inp.mpos_mm, inp.wco_mm, strict=True)]
+            wpos = [f32(m - w) for m, w in zip(inp.mpos_mm, inp.wco_mm, strict=True)]
             parts.append("WPos:" + axes(wpos))
         if status_mask & 2:
             parts.append(f"Bf:{inp.planner_free},{inp.rx_free}")
