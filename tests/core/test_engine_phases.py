@@ -616,24 +616,42 @@ def test_lines_that_cannot_be_built(
 RESET = "the controller was reset"
 RESET_ROWS = [
     row(
-        "banner-mid-session-forgets-every-line",
+        "banner-mid-session-forgets-every-line-and-owes-a-cancel",
         [
             *JOGGING,
             ok,
             line(""),
             line(BANNER),
             phase_is(Phase.IDLE),
+            check(lambda h: "jog lines had no reply yet" in h.fault_texts()[0], "says so"),
             check(lambda h: h.engine.can_jog()[0] is False, "no jog before a report"),
             sends(),
             report("Idle"),
             intent(StepIntent("X", -1.0)),
+            # Jog lines still on the wire at the reset may start the restarted controller:
+            # the owed cancel and its sync come first (the sync waits behind any such line).
+            sends("0x85", "G4P0"),
+            ok,  # goes to the sync: the lines lost to the reset are forgotten
+            report("Idle"),
             sends("$J"),
-            ok,  # goes to the step: the lines lost to the reset are forgotten
+            ok,
             poll,
             phase_is(Phase.SETTLING),
             report("Idle", (-2.0, -1.0, -1.0)),
         ],
-        Expect(Phase.IDLE, faults=(RESET,), stops=((False, 0),)),
+        Expect(Phase.IDLE, faults=(RESET,), stops=((True, 0), (False, 0))),
+    ),
+    row(
+        "banner-with-every-jog-answered-owes-nothing",
+        [
+            *JOGGING,
+            ok_all,
+            line(BANNER),
+            report("Idle"),
+            intent(StepIntent("X", -1.0)),
+            sends("$J"),
+        ],
+        Expect(Phase.STEPPING, faults=(RESET,)),
     ),
     row(
         "alarm-abandons-motion",
@@ -1161,3 +1179,16 @@ def test_continuous_jogs_are_clipped(
 ) -> None:
     """A held jog stops short of the soft limits and keep-outs; nothing unsafe is written."""
     run_row(harness, script, expect)
+
+
+def test_the_cancel_owed_at_a_reset_survives_the_re_handshake() -> None:
+    """The host calls reset_machine after re-reading the controller: jog lines sent before the
+    banner may still start it, so the cancel stays owed and goes out once it reports Jog."""
+    h = EngineHarness()
+    h.intent(ContinuousIntent({"X": -1.0}))
+    h.poll()
+    h.feed(BANNER)
+    h.ledger.reset()
+    h.engine.reset_machine(dataclasses.replace(h.engine.limits))
+    h.status("Jog", (-1.5, -1.0, -1.0))
+    assert kinds(h.poll()) == ["0x85", "G4P0"]

@@ -630,13 +630,22 @@ class Jogger:
             self._fault_now(now_s, f"ALARM:{resp.code} {info.meaning}", info.hint)
             self._abandon_motion()
         elif isinstance(resp, Banner):
+            jogs = sum(1 for e in self._pending if _kind(e) == "jog")
+            lost = (
+                f"; {jogs} jog line{'s' if jogs != 1 else ''} had no reply yet: any that reach"
+                " the restarted controller are cancelled as soon as it reports Jog"
+                if jogs
+                else ""
+            )
             self._fault_now(
                 now_s,
-                "the controller was reset (its banner arrived mid-session)",
+                f"the controller was reset (its banner arrived mid-session){lost}",
                 "check why it reset; smoothjog re-reads its settings before jogging again",
             )
-            self._forget_pending()
+            # Lines still on the wire when it restarted run as new jogs: owe them a cancel
+            # (computed before the replies they will never get are forgotten).
             self._abandon_motion()
+            self._forget_pending()
         elif isinstance(resp, Message) and resp.text == "Check Door":
             self._fault_now(now_s, "the safety door opened", "close the door and resume (~)")
             # The door already cancels the jog; send nothing more (lines in the controller's
@@ -645,10 +654,16 @@ class Jogger:
         return True
 
     def reset_machine(self, limits: EngineLimits) -> None:
-        """Start over after a re-handshake (the controller was reset)."""
+        """Start over after a re-handshake (the controller was reset).
+
+        A cancel owed for jog lines sent before the reset was seen stays owed: they may still
+        start the machine (it is sent once a report shows Jog).
+        """
+        owed = self._cancel_owed
         self.limits = limits
         self._forget_pending()
         self._abandon_motion()
+        self._cancel_owed = owed or self._cancel_owed
 
     # ----------------------------------------------------------------- the driver's tick
     def poll(self, now_s: float) -> list[Output]:
