@@ -173,6 +173,11 @@ class JogTuning:
     planner_reserve_blocks: int = 3
     #: Re-ask for a status report if none came within this time.
     status_timeout_s: float = 0.5
+    #: A stop that has heard no reply for this long (or ten measured round trips, if longer)
+    #: presumes the replies it waits for were lost on the link (a garbled or dropped `ok`:
+    #: Grbl answers every line), cancels and re-syncs instead of waiting for ever. Well over a
+    #: Wi-Fi stall of 200 ms, so a late reply is not taken for a lost one.
+    reply_timeout_s: float = 0.5
     #: A velocity-mode handwheel that sent no detent for this long has stopped: counts still
     #: waiting for planner or RX room are dropped, so the machine rests at the end of what was
     #: sent. Pendants report every 20-50 ms while the wheel turns, so 100 ms is two to five
@@ -321,6 +326,8 @@ class EngineStats:
     jogs_sent: int = 0
     cancels: int = 0
     recancels: int = 0
+    #: Replies to the engine's lines that never came and were presumed lost on the link.
+    replies_presumed_lost: int = 0
     error_replies: int = 0
     soft_limit_errors: int = 0
     run_state_seen: int = 0
@@ -386,6 +393,9 @@ class Jogger:
         self._pending_desync = False
         #: Stopped from outside: continuous intents are ignored until the stick is released.
         self._await_press = False
+        #: When the stop began its current wait, and when the last reply to the engine came.
+        self._stop_wait_s = -math.inf
+        self._last_reply_s = -math.inf
         #: The commanded move a Jog report last showed running at its speed.
         self._seen_at_speed: inc.VectorMove | None = None
         #: Pn letters seen while the machine rested (an input that reads active while Idle).
@@ -595,6 +605,7 @@ class Jogger:
                 self._pending.remove(entry)
             return True
         self._pending.popleft()
+        self._last_reply_s = now_s
         first_ack = not self._track.moving_since_ack
         self._on_reply(entry, resp, now_s)
         routine = (
@@ -1260,6 +1271,29 @@ class Jogger:
             return
         self.phase = Phase.STOPPING
         self._stop.begin()
+        self._stop_wait_s = now_s
+
+    def _reply_overdue(self, now_s: float) -> bool:
+        """True when the stop has waited for a reply longer than any link delays one."""
+        waited_s = now_s - max(self._stop_wait_s, self._last_reply_s)
+        return waited_s > max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
+
+    def _presume_lost(self, now_s: float, kinds: tuple[str, ...]) -> int:
+        """Release the engine's unanswered lines of these kinds as answered; say so."""
+        lost = [e for e in self._pending if _kind(e) in kinds]
+        for entry in lost:
+            self._pending.remove(entry)
+        self.ledger.presume_answered(lost)
+        self.stats.replies_presumed_lost += len(lost)
+        waited_s = now_s - max(self._stop_wait_s, self._last_reply_s)
+        self._fault_now(
+            now_s,
+            f"the controller did not answer {len(lost)} line{'s' if len(lost) != 1 else ''}"
+            f" within {waited_s:.1f} s: the reply was lost on the link",
+            "smoothjog cancelled and re-synced; check the cable or connection if this repeats",
+        )
+        self._stop_wait_s = now_s
+        return len(lost)
 
     def _settle(self, now_s: float) -> None:
         """The queue was sent whole: wait for the machine to report rest."""
@@ -1270,13 +1304,30 @@ class Jogger:
     def _advance_stop(self, now_s: float, out: list[Output]) -> None:
         if self._stop.phase is StopPhase.WAIT_ACKS:
             if self._jogs_unanswered():
-                return  # a cancel now would let these lines run on (firmware-facts §3.1)
+                if not self._reply_overdue(now_s):
+                    return  # a cancel now would let these lines run on (firmware-facts §3.1)
+                # Their replies were lost: the lines ran (or run); cancel whatever moves.
+                self._presume_lost(now_s, ("jog",))
+                self._stop.owe_cancel()
             cancel = bool(self._track.path) or self._stop.cancelled or self.model.state == "Jog"
             if cancel:
                 out.append(SendRealtime(JOG_CANCEL))
                 self.stats.cancels += 1
             self._send(SYNC_LINE, "sync", now_s, out)
             self._stop.sync_sent(cancel_sent=cancel)
+            self._stop_wait_s = now_s
+        elif self._stop.phase is StopPhase.WAIT_SYNC and self._reply_overdue(now_s):
+            # The sync line's reply was lost: sync again (Grbl answers each G4P0 once it has
+            # run every line before it), a bounded number of times.
+            self._presume_lost(now_s, ("sync",))
+            if self._stop.may_recancel():
+                self._stop.recancel()  # back to waiting for acks, then 0x85 and G4P0 again
+                self.stats.recancels += 1
+                self._advance_stop(now_s, out)
+            else:
+                self._stop.sync_failed()
+                self._fresh_status_wanted = True
+                self._status_asked_s = None
 
     def _on_sync_reply(self, resp: Ok | ErrorReply, now_s: float) -> None:
         if self.phase is not Phase.STOPPING:
@@ -1294,6 +1345,7 @@ class Jogger:
             # firmware-facts §3.6: the sync line met a jog that restarted: cancel again.
             self._stop.recancel()
             self.stats.recancels += 1
+            self._stop_wait_s = now_s
             return
         self._fault_now(now_s, f"stop sync failed: error:{resp.code}", error_info(resp.code).hint)
         self._stop.sync_failed()

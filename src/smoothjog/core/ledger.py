@@ -15,6 +15,7 @@ Pure bookkeeping: no I/O, no clock (the caller passes `now_s`).
 from __future__ import annotations
 
 import collections
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from smoothjog.core.errors import CoreError
@@ -67,6 +68,8 @@ class LedgerStats:
     unowned_replies: int = 0
     #: Lines dropped unanswered because the controller reset.
     lost_to_reset: int = 0
+    #: Lines whose reply never came and was presumed lost (a garbled or dropped `ok`).
+    presumed_answered: int = 0
 
 
 class Ledger:
@@ -135,6 +138,20 @@ class Ledger:
         self._in_flight_bytes -= entry.cost
         self.stats.replies[entry.owner] += 1
         return entry
+
+    def presume_answered(self, entries: Iterable[Entry]) -> int:
+        """Release lines whose reply was lost on the way (never arrives); return how many.
+
+        Grbl answers every line, so a reply that never comes was garbled or dropped on the
+        link; keeping its entry would credit every later reply to the wrong line.
+        """
+        gone = {id(e) for e in entries}
+        kept = collections.deque(e for e in self._entries if id(e) not in gone)
+        dropped = len(self._entries) - len(kept)
+        self._entries = kept
+        self._in_flight_bytes = sum(e.cost for e in kept)
+        self.stats.presumed_answered += dropped
+        return dropped
 
     def outstanding(self, owner: str | None = None) -> tuple[Entry, ...]:
         """The unanswered lines (of one owner, or of all), oldest first."""
