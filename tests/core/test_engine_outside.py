@@ -30,7 +30,7 @@ def _cruising() -> EngineHarness:
     h.intent(HELD)
     h.run(1.0)
     h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
-    while h.engine._status_asked_s is None:  # on to the next `?` (it rides on a top-up)
+    while h.engine._status_asked_s is None:  # on to the next `?`
         h.run(h.t + 0.002)
     h.advance(0.003)  # its report comes back a round trip later
     return h

@@ -165,10 +165,6 @@ class JogTuning:
     #: Status polling while moving and while idle (Grbl's docs: 5-10 Hz is comfortable).
     poll_moving_s: float = 0.050
     poll_idle_s: float = 0.250
-    #: A poll that writes a line anyway also sends a `?` due within this time (just over one
-    #: 10.5 ms block), so the status polls of a held jog cost no wake-ups of their own; the
-    #: schedule stays anchored, so reports still come poll_moving_s apart on average.
-    status_early_s: float = 0.015
     #: Planner blocks the engine leaves free so an `ok` is never held back by a full planner.
     planner_reserve_blocks: int = 3
     #: Re-ask for a status report if none came within this time.
@@ -1639,14 +1635,10 @@ class Jogger:
         asked = self._status_asked_s
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
-        due_s = self._last_status_sent_s + self._poll_interval_s()
-        # Only while streaming: in a stop the `?` must wait for the moment the stop needs it.
-        early_s = self.tuning.status_early_s if out and self.phase is Phase.JOGGING else 0.0
-        if self._status_urgent() or now_s >= due_s - early_s:
+        if self._status_urgent() or now_s - self._last_status_sent_s >= self._poll_interval_s():
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s
-            # Sent early on a tick that writes anyway: keep the schedule, not the early time.
-            self._last_status_sent_s = due_s if now_s < due_s else now_s
+            self._last_status_sent_s = now_s
 
     # ----------------------------------------------------------------- lines in flight
     # The engine's lines go into the host's ledger, which counts every owner's bytes against
