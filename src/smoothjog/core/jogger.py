@@ -926,7 +926,9 @@ class Jogger:
         seg = PathSeg(
             start,
             end,
-            seg_len,
+            # The length between the float positions the path keeps (not the exact increment),
+            # so the path's own arithmetic stays what it was before repeats were cached.
+            norm(tuple(e - s for e, s in zip(end, start, strict=True))),
             move.speed_mm_s,
             move.accel_mm_s2,
             self._track.length_mm(),
