@@ -55,6 +55,7 @@ def test_a_report_as_late_as_its_query_allows_is_no_outside_stop() -> None:
     # v x 0.2 s behind the estimate, and still be a faithful report of a running jog.
     h = _cruising()
     h.advance(0.2)
+    h.engine._track.update_estimate(h.t)  # where the engine expects the machine by now
     h.status("Jog", _estimate_mm(h, behind_mm=0.9 * V_MM_S * 0.2), fs=(3000, 0))
     assert _outside_faults(h) == []
     assert h.engine.phase is Phase.JOGGING
@@ -64,6 +65,22 @@ def test_a_slower_report_close_behind_is_no_outside_stop() -> None:
     h = _cruising()
     h.status("Jog", _estimate_mm(h, behind_mm=0.2), fs=(4000, 0))
     assert h.fault_texts() == []
+
+
+def test_a_jog_braking_for_the_end_of_what_was_acknowledged_is_no_outside_stop() -> None:
+    # Lines late on a stalled link: no reply for a while, the estimate runs on along every
+    # line sent, while the machine brakes to stop at the end of the acknowledged ones.
+    h = _cruising()
+    track = h.engine._track
+    acked = [seg for seg in track.path if seg.acked]
+    acked_end_mm = acked[-1].x0_mm + acked[-1].length_mm
+    while track.x_est_mm < acked_end_mm - 0.5:
+        h.advance(0.002)
+        track.update_estimate(h.t)
+    h.engine._status_asked_s = h.t - 0.003  # a fresh `?`: its age explains no lag
+    v_mm_s = 40.0  # stopping from here takes 1.6 mm, and the acknowledged jogs hold 2.6
+    h.status("Jog", track.point_at(acked_end_mm - 2.6), fs=(v_mm_s * 60, 0))
+    assert _outside_faults(h) == []
 
 
 def test_a_jog_never_seen_at_speed_is_not_judged() -> None:

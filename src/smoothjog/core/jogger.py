@@ -1565,11 +1565,21 @@ class Jogger:
         planned = [seg for seg in self._track.path if seg.acked]
         if not planned:
             return False
-        planned_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - predicted_mm
-        if planned_ahead_mm < inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2):
-            return False  # the planner may be braking for the end of what it holds
+        # The planner holds at least the acknowledged jogs; a machine braking for their end
+        # (lines late on a stalled link) has no more ahead of it than it needs to stop from
+        # the speed it reports. One braking with far more ahead was stopped by someone else.
+        speed_mm_s = mm_min_to_mm_s(feed) if feed is not None else self._track.v_est_mm_s
+        ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
+        needed_mm = (
+            inc.stop_distance_mm(speed_mm_s, move.accel_mm_s2)
+            + move.speed_mm_s * self.tuning.committed_s
+            + OUTSIDE_LAG_MM
+        )
+        if ahead_mm <= needed_mm:
+            return False
         lag_mm = predicted_mm - self._track.x_est_mm
-        allowed_mm = self._track.v_est_mm_s * max(now_s - asked_s, 0.0)
+        # A report built any time since its `?` may be this much older than now.
+        allowed_mm = max(self._track.v_est_mm_s, move.speed_mm_s) * max(now_s - asked_s, 0.0)
         # The estimate follows short blocks and the end of a queue less closely at speed (the
         # fuzz showed 0.6-0.7 mm at 20-25 mm/s): allow the larger of OUTSIDE_LAG_MM, two steps
         # and 15 ms at the commanded speed (1.25 mm at 5000 mm/min).
