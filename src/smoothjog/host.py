@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
@@ -126,6 +127,9 @@ class Host:
         """Prepare a host over an opened link; call start() next."""
         self.link = link
         self.tuning = tuning or JogTuning()
+        if self.tuning.byte_s is None and link.byte_time_s() is not None:
+            # The engine sizes its blocks, polls and report ages by the wire it really has.
+            self.tuning = dataclasses.replace(self.tuning, byte_s=link.byte_time_s())
         self.keepouts = tuple(keepouts)
         self.handshake_timeout_s = handshake_timeout_s
         self.on_event = on_event

@@ -110,7 +110,7 @@ def test_a_status_report_wants_a_poll_only_when_it_changes_something(
     h.engine._track.update_estimate(h.t)
     x_now = h.engine._track.x_est_mm
     # The report's own wire time moves it forward; place it so the estimate lands lead_mm on.
-    age_s = (len(status_line(state, START_MPOS)) + 2) * h.engine.tuning.byte_s
+    age_s = (len(status_line(state, START_MPOS)) + 2) * h.engine._byte_s
     along_mm = x_now + lead_mm - h.engine._track.v_est_mm_s * age_s
     mpos = (START_MPOS[0] - along_mm, START_MPOS[1], START_MPOS[2])
     resp_line = status_line(state, mpos, (5000, 0))

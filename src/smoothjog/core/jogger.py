@@ -91,7 +91,17 @@ ROUTINE_LEAD_MM = 0.05
 #: estimate follows the firmware's planner to well under this at every stop (bench tables).
 OUTSIDE_LAG_MM = 0.75
 #: Jog-line latencies the round-trip estimate looks at.
-RTT_WINDOW = 32
+RTT_WINDOW = 64
+#: How long a round trip far above the usual (a stall) keeps the queue long.
+RTT_MEMORY_S = 30.0
+#: A round trip longer than this is a link that stopped, not one to size a queue for.
+RTT_CAP_S = 0.5
+#: Share of the wire's throughput the engine's own lines may take (the rest: `?`, other owners).
+LINE_SHARE = 0.6
+#: Share of the return wire the status reports may take (the rest: replies, messages).
+REPORT_SHARE = 0.3
+#: Bytes of a typical jog line with its newline, for sizing before the first one is written.
+JOG_LINE_BYTES = 24
 
 #: Controller states in which a jog is accepted (firmware-facts §1.4).
 JOG_STATES = frozenset({"Idle", "Jog"})
@@ -158,10 +168,11 @@ class JogTuning:
     tick_s: float = 0.001
     #: How often the engine looks while a queue runs out or steps wait for planner room.
     settle_tick_s: float = 0.005
-    #: Wire time of one byte from the controller (115200 8N1: 86.8 µs); a status report's position
-    #: is as old as its bytes took to arrive (firmware-facts §6). Overstating it only makes the
-    #: queue longer, never too short.
-    byte_s: float = BITS_PER_BYTE_8N1 / DEFAULT_BAUD
+    #: Wire time of one byte (115200 8N1: 86.8 µs); None: the link's own (the host asks it), or
+    #: 115200 baud's if the link does not know. A status report's position is as old as its
+    #: bytes took to arrive (firmware-facts §6), and lines, replies and reports must fit the
+    #: wire's throughput. Overstating it only makes blocks longer and polls rarer.
+    byte_s: float | None = None
     #: Status polling while moving and while idle (Grbl's docs: 5-10 Hz is comfortable).
     poll_moving_s: float = 0.050
     poll_idle_s: float = 0.250
@@ -401,7 +412,9 @@ class Jogger:
         self._ratios_version = 0
         #: The increment a cruising jog repeats (None: work the next one out afresh).
         self._cruise: _Cruise | None = None
-        self._block_cache: tuple[inc.VectorMove, EngineLimits, float] | None = None
+        self._block_cache: tuple[inc.VectorMove, EngineLimits, tuple[float, int], float] | None = (
+            None
+        )
         self._velocity_cache: (
             tuple[ContinuousIntent, int, EngineLimits, inc.VectorMove | None] | None
         ) = None
@@ -422,6 +435,13 @@ class Jogger:
         self._last_status_sent_s = -math.inf
         self._rtt_s = 0.003  # time for a jog line to be planned: a low percentile of its ok latency
         self._rtts: deque[float] = deque(maxlen=RTT_WINDOW)
+        self._rtt_hi_s = self._rtt_s  # what the queue and the lines in flight are sized for
+        #: Decreasing latencies of the last RTT_MEMORY_S (a sliding maximum), oldest first.
+        self._rtt_peaks: deque[tuple[float, float]] = deque()
+        self._byte_s = self.tuning.byte_s or BITS_PER_BYTE_8N1 / DEFAULT_BAUD
+        self._line_bytes = JOG_LINE_BYTES
+        self._last_report_bytes = 50  # a Grbl 1.1 report with MPos, FS and Pn
+        self._last_report_s = -math.inf
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
@@ -798,7 +818,7 @@ class Jogger:
         """
         longest_s = self._track.longest_queued_s(block_s)
         committed = min(inc.committed_s(longest_s), self.tuning.committed_s)
-        return committed + self._rtt_s + self.tuning.link_margin_s
+        return committed + self._rtt_hi_s + self.tuning.link_margin_s
 
     def _block_s(self, move: inc.VectorMove) -> float:
         """Duration of one increment at this speed: just over one 10 ms segment when possible.
@@ -809,10 +829,21 @@ class Jogger:
         stopping distance within the blocks the engine allows itself.
         """
         cache = self._block_cache
-        if cache is not None and cache[0] is move and cache[1] is self.limits:
-            return cache[2]  # a held jog asks for the same move at every poll
+        if (
+            cache is not None
+            and cache[0] is move
+            and cache[1] is self.limits
+            and cache[2] == (self._rtt_hi_s, self._line_bytes)
+        ):
+            return cache[3]  # a held jog asks for the same move at every poll
         usable = max(self.limits.planner_blocks - self.tuning.planner_reserve_blocks, 2)
+        # The link: each line must reach the controller before the queue needs the next one
+        # (a 9600 baud wire takes 25 ms for a jog line), and the lines the RX buffer holds
+        # must span the round trip until their replies make room for more.
+        rx_lines = max(self.limits.rx_buffer_bytes // self._line_bytes - 1, 1)
         block_s = max(
+            self._line_bytes * self._byte_s / LINE_SHARE,
+            self._rtt_hi_s / rx_lines,
             self.tuning.dt_floor_s,
             inc.min_block_s(move.speed_mm_s, move.accel_mm_s2, self.limits.planner_blocks),
             inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2)
@@ -821,7 +852,7 @@ class Jogger:
             # are all rounding (Grbl plans a block under half a step as nothing).
             1.5 * self._step_along_mm(move.unit_vec) / move.speed_mm_s,
         )
-        self._block_cache = (move, self.limits, block_s)
+        self._block_cache = (move, self.limits, (self._rtt_hi_s, self._line_bytes), block_s)
         return block_s
 
     def _step_along_mm(self, unit_vec: Sequence[float]) -> float:
@@ -960,6 +991,7 @@ class Jogger:
             axes=self.limits.axes,
             max_line_chars=self.limits.max_line_chars,
         )
+        self._line_bytes = max(self._line_bytes, len(line) + 1)  # sizes blocks for the link
         delta_vec = tuple(deltas.get(axis, 0.0) for axis in self.limits.axes)
         seg_len = norm(delta_vec)
         if clipped_move is not move or clipped_mm != length_mm or seg_len <= 0.0:
@@ -1272,9 +1304,16 @@ class Jogger:
         self._stop_wait_s = now_s
 
     def _reply_overdue(self, now_s: float) -> bool:
-        """True when the stop has waited for a reply longer than any link delays one."""
-        waited_s = now_s - max(self._stop_wait_s, self._last_reply_s)
-        return waited_s > max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
+        """True when the stop has waited for a reply longer than any link delays one.
+
+        While the machine still moves, Grbl may rightly hold a reply until its planner has
+        room (a long block on a slow machine), so the wait is then eight times as long;
+        once a report since the wait began shows it at rest, the short wait applies.
+        """
+        since_s = max(self._stop_wait_s, self._last_reply_s)
+        limit_s = max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
+        at_rest = self.model.state == "Idle" and self._last_report_s > since_s
+        return now_s - since_s > (limit_s if at_rest else 8.0 * limit_s)
 
     def _presume_lost(self, now_s: float, kinds: tuple[str, ...]) -> int:
         """Release the engine's unanswered lines of these kinds as answered; say so."""
@@ -1409,8 +1448,27 @@ class Jogger:
         if isinstance(resp, Ok):
             # The upper quartile of recent latencies: it follows a jittery link, yet one ok
             # delayed behind a status report on the way back does not move it.
-            self._rtts.append(now_s - entry.sent_s)
-            self._rtt_s = sorted(self._rtts)[(3 * len(self._rtts)) // 4]
+            latency_s = now_s - entry.sent_s
+            if latency_s > 2.0 * self._rtt_s + 0.010:
+                # A reply held up on the link (a stall): the lines behind it were late too, so
+                # the machine may have run short and slowed. That is no outside stop: judge
+                # only once a report shows it at speed again.
+                self._seen_at_speed = None
+            self._rtts.append(latency_s)
+            ranked = sorted(self._rtts)
+            self._rtt_s = ranked[(3 * len(ranked)) // 4]
+            # The queue must bridge nearly the slowest round trip the link shows (its jitter
+            # and stalls, firmware-facts §6), not a typical one: the second largest of the
+            # window (about its 97th percentile; one reply held behind a report is ignored).
+            # A stall (a Wi-Fi link pausing every few seconds) is remembered for RTT_MEMORY_S:
+            # the window alone would forget it between two stalls and dip at each.
+            peaks = self._rtt_peaks
+            while peaks and peaks[-1][1] <= latency_s:
+                peaks.pop()
+            peaks.append((now_s, latency_s))
+            while peaks[0][0] < now_s - RTT_MEMORY_S:
+                peaks.popleft()
+            self._rtt_hi_s = max(ranked[max(len(ranked) - 2, 0)], min(peaks[0][1], RTT_CAP_S))
             self._track.ack(pending.seg, now_s)
             return
         # A rejected G91 jog leaves the parser where it was, so every later increment is off:
@@ -1427,6 +1485,8 @@ class Jogger:
         """Take a status report; return how far it moved the estimate forward (mm)."""
         asked_s = self._status_asked_s
         self._status_asked_s = None
+        self._last_report_bytes = len(report.raw) + 2
+        self._last_report_s = now_s
         state = report.state
         mpos = self.model.mpos_mm
         lead_mm = 0.0
@@ -1441,9 +1501,7 @@ class Jogger:
             # ran ~4 ms ahead of the machine, which a velocity-mode wheel's lead bound felt).
             self._track.update_estimate(now_s)
             predicted_mm = self._track.x_est_mm
-            off_path = self._track.correct_estimate(
-                mpos, (len(report.raw) + 2) * self.tuning.byte_s
-            )
+            off_path = self._track.correct_estimate(mpos, (len(report.raw) + 2) * self._byte_s)
             lead_mm = self._track.x_est_mm - predicted_mm
             if not off_path and self._lags_outside(report, predicted_mm, asked_s, now_s):
                 # Behind the estimate by more than the report's age explains: the machine is
@@ -1641,7 +1699,11 @@ class Jogger:
 
     def _poll_interval_s(self) -> float:
         busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
-        return self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
+        interval_s = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
+        # Reports must leave the return wire room for the replies: at 9600 baud a 50-byte
+        # report takes 52 ms, so 20 Hz would fill it.
+        report = self._last_report_bytes * self._byte_s / REPORT_SHARE
+        return max(interval_s, report)
 
     def _poll_status(self, now_s: float, out: list[Output]) -> None:
         asked = self._status_asked_s

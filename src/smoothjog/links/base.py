@@ -291,6 +291,10 @@ class Link(ABC):
         if inbox is not None:
             inbox.unsubscribe()
 
+    def byte_time_s(self) -> float | None:
+        """Wire time of one byte from the controller, when the link knows it (None if not)."""
+        return None
+
     def cork(self) -> None:  # noqa: B027 - optional: most links write at once
         """Hold what is sent from now on until uncork(), to write it in one go."""
 

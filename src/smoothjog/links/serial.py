@@ -19,6 +19,7 @@ import stat
 import serial
 
 from smoothjog.core.errors import LinkError
+from smoothjog.core.firmware import BITS_PER_BYTE_8N1
 from smoothjog.core.responses import Banner, parse_response
 from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
@@ -131,6 +132,10 @@ class SerialLink(Link):
         self._corked = False
         if self._serial is not None and self._error is None:
             self._flush()
+
+    def byte_time_s(self) -> float:
+        """One byte at this baud rate, 8N1."""
+        return BITS_PER_BYTE_8N1 / self.baud
 
     def _line_inbox(self) -> LineInbox:
         return self._inbox

@@ -75,6 +75,10 @@ class SimLink(Link):
         self._sim.send(data)
         return True
 
+    def byte_time_s(self) -> float:
+        """The modelled wire's byte time."""
+        return self.rig.link.byte_time_s
+
     def _line_inbox(self) -> LineInbox:
         return self._inbox
 
