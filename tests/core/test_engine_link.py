@@ -1,0 +1,92 @@
+"""The engine sizes itself from the link it measures: round trips, stalls, baud and RX room."""
+
+from __future__ import annotations
+
+import re
+
+from smoothjog.core import increments as inc
+from smoothjog.core.intents import ContinuousIntent
+from smoothjog.core.jogger import JogTuning, SendRealtime
+from smoothjog.core.realtime import STATUS_QUERY
+from tests.core.engine_harness import START_MPOS, EngineHarness
+
+HELD = ContinuousIntent({"X": -1.0}, 1.0)
+V_MM_S = 5000 / 60
+A_MM_S2 = 500.0
+
+
+def _increment_mm(line: str) -> float:
+    match = re.search(r"X(-?[\d.]+)", line)
+    assert match, line
+    return abs(float(match.group(1)))
+
+
+def _held(h: EngineHarness, seconds: float, *, reply_s: float = 0.002) -> None:
+    """Hold the stick; every line answered reply_s after it was sent, a report at each `?`."""
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    answers: list[float] = []
+    end_s = h.t + seconds
+    while h.t < end_s:
+        h.advance(0.002)
+        while answers and answers[0] <= h.t:
+            answers.pop(0)
+            h.ok()
+        out = h.poll()
+        answers += [h.t + reply_s] * sum(1 for o in out if not isinstance(o, SendRealtime))
+
+
+def test_at_9600_baud_blocks_are_long_enough_for_the_wire_and_polls_leave_it_room() -> None:
+    fast = EngineHarness()
+    _held(fast, 1.0)
+    slow = EngineHarness(tuning=JogTuning(byte_s=10 / 9600))
+    _held(slow, 1.0)
+    fast_mm = _increment_mm(fast.jog_lines()[-2])
+    slow_mm = _increment_mm(slow.jog_lines()[-2])
+    line_s = (len(slow.jog_lines()[-2]) + 1) * 10 / 9600
+    # A line takes line_s on the wire: a block must last well over that at full speed.
+    assert slow_mm / V_MM_S >= line_s / 0.6 - 1e-9
+    assert slow_mm > 2 * fast_mm
+    queries = [i for i, o in enumerate(slow.sent) if getattr(o, "byte", None) == STATUS_QUERY]
+    assert len(queries) <= 1.0 / 0.15 + 1  # 50-byte reports at 9600 baud: not 20 a second
+
+
+def test_slow_round_trips_lengthen_the_queue_and_the_blocks() -> None:
+    h = EngineHarness()
+    _held(h, 2.0, reply_s=0.100)
+    engine = h.engine
+    assert engine._rtt_hi_s >= 0.099
+    # The lines the 128-byte RX buffer holds must span the round trip.
+    line_bytes = len(h.jog_lines()[-2]) + 1
+    rx_lines = 128 // line_bytes - 1
+    assert _increment_mm(h.jog_lines()[-2]) / V_MM_S >= 0.1 / rx_lines - 1e-5  # 4 decimals
+    # And the queue bridges that round trip beyond the stopping distance.
+    target_mm = inc.queue_target_mm(V_MM_S, A_MM_S2, engine._ahead_s(0.0105))
+    assert target_mm >= V_MM_S**2 / (2 * A_MM_S2) + V_MM_S * 0.1
+
+
+def test_a_stall_is_remembered_for_thirty_seconds_then_forgotten() -> None:
+    h = EngineHarness()
+    _held(h, 0.5)
+    typical_s = h.engine._rtt_hi_s
+    # One reply held up 0.3 s, then the link is quick again for 20 s of replies.
+    engine = h.engine
+    h.ok_all()
+    while not h.unanswered():
+        h.advance(0.002)
+        h.poll()
+    h.oldest_engine_line().sent_s = h.t - 0.3
+    h.ok()
+    assert engine._rtt_hi_s >= 0.299
+    _answers_for(h, 20.0)
+    assert engine._rtt_hi_s >= 0.299  # still sized for the stall
+    _answers_for(h, 11.0)
+    assert engine._rtt_hi_s <= typical_s + 0.005
+
+
+def _answers_for(h: EngineHarness, seconds: float) -> None:
+    end_s = h.t + seconds
+    while h.t < end_s:
+        h.advance(0.002)
+        h.ok_all()
+        h.poll()
