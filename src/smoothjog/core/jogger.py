@@ -89,7 +89,13 @@ ROUTINE_LEAD_MM = 0.05
 #: A report that puts the machine this much further behind the estimate than its age can
 #: explain means it is not running what was sent (an outside feed hold or cancel): the
 #: estimate follows the firmware's planner to well under this at every stop (bench tables).
-OUTSIDE_LAG_MM = 0.75
+OUTSIDE_LAG_MM = 0.05
+#: ... or this long at the commanded speed, if more. The fuzz's turns, slowdowns and queue
+#: ends at 20-25 mm/s showed up to 0.7 mm of estimate lag with no outside stop; an outside
+#: stop pauses a jog at least 50 ms (two $1 delays, firmware-facts §3.7).
+OUTSIDE_LAG_S = 0.03
+#: ... but never more than this: a hold at full speed must be seen within its deceleration.
+OUTSIDE_LAG_CAP_MM = 1.0
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 64
 #: How long a round trip far above the usual (a stall) keeps the queue long.
@@ -711,7 +717,8 @@ class Jogger:
         self._wake_at_s = None
         self._rx_blocked = False
         self._track.update_estimate(now_s)
-        self._track.prune()
+        # A report can be as old as its `?` wait plus the slowest round trip seen (a stall).
+        self._track.prune(0.3 + self._rtt_hi_s)
         self._act_on_intent(now_s)
         if self.phase is Phase.IDLE:
             if self._steps and self._may_jog():
@@ -1614,7 +1621,7 @@ class Jogger:
             return False
         feed = report.feed
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
-        if self._seen_at_speed is not move:
+        if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
                 self._seen_at_speed = move
             return False
@@ -1625,25 +1632,34 @@ class Jogger:
             return False
         # The planner holds at least the acknowledged jogs; a machine braking for their end
         # (lines late on a stalled link) has no more ahead of it than it needs to stop from
-        # the speed it reports. One braking with far more ahead was stopped by someone else.
+        # the speed it reports. One braking with more ahead was stopped by someone else.
         speed_mm_s = mm_min_to_mm_s(feed) if feed is not None else self._track.v_est_mm_s
+        age_s = max(now_s - asked_s, 0.0)
         ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
+        step_mm = 1.0 / min(self.limits.steps_per_mm)
         needed_mm = (
             inc.stop_distance_mm(speed_mm_s, move.accel_mm_s2)
-            + move.speed_mm_s * self.tuning.committed_s
-            + OUTSIDE_LAG_MM
+            + speed_mm_s * age_s
+            + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
         )
         if ahead_mm <= needed_mm:
             return False
         lag_mm = predicted_mm - self._track.x_est_mm
         # A report built any time since its `?` may be this much older than now.
         allowed_mm = max(self._track.v_est_mm_s, move.speed_mm_s) * max(now_s - asked_s, 0.0)
-        # The estimate follows short blocks and the end of a queue less closely at speed (the
-        # fuzz showed 0.6-0.7 mm at 20-25 mm/s): allow the larger of OUTSIDE_LAG_MM, two steps
-        # and 15 ms at the commanded speed (1.25 mm at 5000 mm/min).
-        margin_mm = max(
-            OUTSIDE_LAG_MM, 2.0 / min(self.limits.steps_per_mm), move.speed_mm_s * 0.015
-        )
+        # The estimate follows short blocks and the end of a queue less closely at speed:
+        # allow the larger of OUTSIDE_LAG_MM, two steps and OUTSIDE_LAG_S at the commanded
+        # speed, at most OUTSIDE_LAG_CAP_MM (1 mm at 5000 mm/min, 0.25 mm at 500).
+        if feed == 0.0:
+            # At rest in Jog with path acknowledged ahead (checked above): only a stop that is
+            # not smoothjog's rests there; a few steps of estimate error are all to allow.
+            margin_mm = 3.0 * step_mm
+        else:
+            margin_mm = max(
+                OUTSIDE_LAG_MM,
+                2.0 * step_mm,
+                min(move.speed_mm_s * OUTSIDE_LAG_S, OUTSIDE_LAG_CAP_MM),
+            )
         return lag_mm > allowed_mm + margin_mm
 
     def _outside_stop(self, now_s: float, report: StatusReport, how: str) -> None:

@@ -159,12 +159,15 @@ class PathTracker:
                 longest_s = max(longest_s, seg.length_mm / seg.speed_mm_s)
         return longest_s
 
-    def prune(self) -> None:
-        """Forget jogs the machine finished long ago (the path would grow without end)."""
-        keep_from = self.x_est_mm - PATH_KEEP_MM
-        # Never forget what the next status reports can still show: their position is a few
-        # milliseconds old, so keep well over that much path behind the estimate.
-        recent_from = self.x_est_mm - (1.0 + self.v_est_mm_s * 0.3)
+    def prune(self, report_age_s: float = 0.3) -> None:
+        """Forget jogs the machine finished long ago (the path would grow without end).
+
+        Never forget what a status report can still show: one may be report_age_s old when it
+        arrives (a stalled link delivers reports late), so that much path behind the estimate
+        is kept, at least PATH_KEEP_MM.
+        """
+        recent_from = self.x_est_mm - (1.0 + self.v_est_mm_s * report_age_s)
+        keep_from = min(self.x_est_mm - PATH_KEEP_MM, recent_from)
         drop = 0
         while drop < len(self.path) - 1 and (
             self.path[drop].x0_mm + self.path[drop].length_mm < keep_from
