@@ -680,7 +680,7 @@ STEP_ROWS = [
             check(
                 lambda h: (
                     h.jog_lines()
-                    == ["$J=G21G91X-1F2500", "$J=G21G91Y-2.5F1250", "$J=G21G53X-10Z-3F2500"]
+                    == ["$J=G21G91X-1F2500", "$J=G21G91Y-2.5F1250", "$J=G21G53X-10Z-3F2576.941"]
                 ),
                 "the lines in order",
             ),
@@ -1192,3 +1192,27 @@ def test_the_cancel_owed_at_a_reset_survives_the_re_handshake() -> None:
     h.engine.reset_machine(dataclasses.replace(h.engine.limits))
     h.status("Jog", (-1.5, -1.0, -1.0))
     assert kinds(h.poll()) == ["0x85", "G4P0"]
+
+
+def _feeds(h: EngineHarness) -> set[str]:
+    return {line.rsplit("F", 1)[1] for line in h.jog_lines()}
+
+
+def test_speed_is_a_fraction_of_each_axis_own_maximum() -> None:
+    """Z at 25 % jogs at a quarter of $112 (1500 mm/min here), not of the fastest axis."""
+    z_slow = {"max_rate_mm_min": (5000.0, 5000.0, 1500.0)}
+    h = EngineHarness(limits=z_slow)
+    h.intent(ContinuousIntent({"Z": -1.0}, 0.25))
+    h.run(0.2)
+    assert _feeds(h) == {"375"}
+    ratios = EngineHarness(limits=z_slow)
+    ratios.engine.set_speed_ratios({"Z": 0.25})
+    ratios.intent(ContinuousIntent({"Z": -1.0}, 1.0))
+    ratios.run(0.2)
+    assert _feeds(ratios) == {"375"}
+    # A diagonal: each axis at the same fraction of its own maximum.
+    diag = EngineHarness(limits=z_slow)
+    diag.intent(ContinuousIntent({"X": -1.0, "Z": -1.0}, 0.5))
+    diag.run(0.2)
+    x_mm, z_mm = (float(v) for v in re.findall(r"[XZ](-?[\d.]+)", diag.jog_lines()[-2]))
+    assert z_mm / x_mm == pytest.approx(1500 / 5000, rel=0.01)

@@ -796,10 +796,14 @@ class Jogger:
         return move
 
     def _velocity_of(self, intent: ContinuousIntent) -> inc.VectorMove | None:
-        base_mm_s = mm_min_to_mm_s(self._max_feed_mm_min()) * intent.speed
+        # Speed, deflection and ratio are fractions of each axis's own maximum ($11x), as the
+        # docs say: Z at 25 % runs at a quarter of $112, not at a quarter of the fastest axis.
         vel = tuple(
-            intent.axes.get(axis, 0.0) * self._ratios.get(axis, 1.0) * base_mm_s
-            for axis in self.limits.axes
+            intent.axes.get(axis, 0.0)
+            * self._ratios.get(axis, 1.0)
+            * intent.speed
+            * mm_min_to_mm_s(self._axis_feed_mm_min(rate_mm_min))
+            for axis, rate_mm_min in zip(self.limits.axes, self.limits.max_rate_mm_min, strict=True)
         )
         move = inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
         if move is None or move.speed_mm_s < MIN_FEED_MM_S:
@@ -808,6 +812,11 @@ class Jogger:
 
     def _max_feed_mm_min(self) -> float:
         return self.tuning.max_feed_mm_min or max(self.limits.max_rate_mm_min)
+
+    def _axis_feed_mm_min(self, rate_mm_min: float) -> float:
+        """An axis's full jog speed: its $11x, or the configured top feed if that is lower."""
+        cap = self.tuning.max_feed_mm_min
+        return min(rate_mm_min, cap) if cap else rate_mm_min
 
     def _start_jogging(self, now_s: float) -> None:
         mpos = self.model.mpos_mm
@@ -1279,7 +1288,11 @@ class Jogger:
         )
         if move is None:
             return None
-        speed_mm_s = min(mm_min_to_mm_s(self._max_feed_mm_min()) * step.speed, move.speed_mm_s)
+        # A fraction of the fastest this direction allows, each axis within its own $11x.
+        top_mm_s = move.speed_mm_s
+        if self.tuning.max_feed_mm_min:
+            top_mm_s = min(top_mm_s, mm_min_to_mm_s(self.tuning.max_feed_mm_min))
+        speed_mm_s = top_mm_s * step.speed
         line = build_jog_line(
             moves=moves,
             feed_mm_min=round(mm_s_to_mm_min(speed_mm_s), 3),
@@ -1627,6 +1640,13 @@ class Jogger:
             return False
         if (feed is not None and feed >= 0.9 * cmd_mm_min) or asked_s is None:
             return False
+        seg = self._track.seg_at(self._track.x_est_mm)
+        if seg is None or seg.unit_vec is None or self._near_a_slow_junction(move):
+            # Only a cruise is judged (the same unclipped increment repeated): at a turn, a
+            # slide along an edge or a speed change the machine slows and the estimate follows
+            # it less closely. Judge again once it is back at speed.
+            self._seen_at_speed = None
+            return False
         planned = [seg for seg in self._track.path if seg.acked]
         if not planned:
             return False
@@ -1661,6 +1681,25 @@ class Jogger:
                 min(move.speed_mm_s * OUTSIDE_LAG_S, OUTSIDE_LAG_CAP_MM),
             )
         return lag_mm > allowed_mm + margin_mm
+
+    def _near_a_slow_junction(self, move: inc.VectorMove) -> bool:
+        """True while the estimate is within a speed-up's reach past a junction the planner
+        slows for (or just before one it brakes for)."""
+        x = self._track.x_est_mm
+        longest_mm = 2.0 * inc.stop_distance_mm(move.speed_mm_s, move.accel_mm_s2)
+        for seg in reversed(self._track.path):
+            # Twice the distance to reach the block's speed at its own acceleration: a slide
+            # along an edge leaves the axes with the lowest acceleration.
+            reach_mm = seg.speed_mm_s**2 / seg.accel_mm_s2
+            longest_mm = max(longest_mm, reach_mm)
+            if seg.x0_mm + longest_mm < x:
+                break
+            if (
+                seg.x0_mm - reach_mm <= x <= seg.x0_mm + reach_mm
+                and seg.entry_cap_mm_s < 0.95 * seg.speed_mm_s
+            ):
+                return True
+        return False
 
     def _outside_stop(self, now_s: float, report: StatusReport, how: str) -> None:
         """Someone else stopped the jog: say so, sync, and wait for a new press."""
