@@ -406,6 +406,8 @@ class Jogger:
         self._pending_desync = False
         #: Stopped from outside: continuous intents are ignored until the stick is released.
         self._await_press = False
+        #: A neutral or stop came since the last press (the next press clears the fault shown).
+        self._released = True
         #: When the stop began its current wait, and when the last reply to the engine came.
         self._stop_wait_s = -math.inf
         self._last_reply_s = -math.inf
@@ -484,6 +486,7 @@ class Jogger:
             self._steps.append(intent)  # steps queue in order; a held stick is released
             self._intent = None
             self._await_press = False  # a step is a press of its own
+            self._fault = None  # and the user has seen what went wrong before it
             return
         if isinstance(intent, HandwheelIntent):
             self._validate(intent)
@@ -496,9 +499,15 @@ class Jogger:
             self._steps.clear()
             self._stop_requested = True
             self._await_press = False
+            self._released = True
             return
         # A neutral stick is a stop and is not checked further (an unknown axis at 0 is fine).
         self._validate(intent)
+        if self._released:
+            # A new press after a release: the fault shown since was seen; clear the banner.
+            # (A held stick re-sent by its input is no new press and keeps it.)
+            self._released = False
+            self._fault = None
         if self._await_press:
             # Someone else stopped this jog: the stick still held (or re-sent by its input) is
             # not a new press, so the machine stays where it was stopped.
