@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 from smoothjog.core.intents import StepIntent, StopIntent
-from tests.core.engine_harness import START_MPOS, EngineHarness
+from tests.core.engine_harness import EngineHarness
 from tests.core.test_engine_outside import HELD, _cruising, _estimate_mm
 
 
 def _refused_step(h: EngineHarness) -> None:
-    h.rest_at(START_MPOS)
-    h.intent(StepIntent("X", 5.0))  # the + corner is 1 mm away: past the soft limit
+    h.rest_at((-1 / 80, -1.0, -1.0))  # one step inside the + soft limit: no room that way
+    h.intent(StepIntent("X", 5.0))
     h.poll()
     assert h.engine.view(h.t).fault is not None
 

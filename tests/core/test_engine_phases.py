@@ -436,7 +436,7 @@ STATUS_ROWS = [
             check(lambda h: h.engine._track.at_rest_at_end(), "known to rest at the end"),
             sends(),
         ],
-        Expect(Phase.JOGGING),
+        Expect(Phase.JOGGING, never=("fault",)),
         soft_limits=True,
     ),
     row(
@@ -693,11 +693,34 @@ STEP_ROWS = [
         Expect(Phase.IDLE, stops=((False, 0),)),
     ),
     row(
-        "step-past-the-soft-limit-refused",
-        [intent(StepIntent("X", 5.0)), sends("?"), report("Idle")],
+        "step-past-the-soft-limit-is-shortened-and-says-so",
+        # Homed at -1 with the + soft limit at 0: a 5 mm step goes to one step inside it.
+        [
+            intent(StepIntent("X", 5.0)),
+            sends("$J", "?"),
+            check(lambda h: h.jog_lines() == ["$J=G21G91X0.9875F2500"], "shortened"),
+            check(
+                lambda h: any(
+                    "step X+ shortened to 0.9875 mm (asked 5 mm): the soft limit" in e.text
+                    for e in h.engine.events
+                ),
+                "says so",
+            ),
+        ],
+        Expect(Phase.STEPPING, never=("fault",)),
+        soft_limits=True,
+    ),
+    row(
+        "step-with-no-room-is-refused-in-words",
+        [
+            rest_at((-0.0125, -1.0, -1.0)),
+            intent(StepIntent("X", 5.0)),
+            sends("?"),
+            report("Idle", (-0.0125, -1.0, -1.0)),
+        ],
         Expect(
             Phase.IDLE,
-            faults=("jog refused: the target lies outside the soft limits",),
+            faults=("step refused: no room to jog X+, the soft limit is there (at X -0.01",),
             stops=((False, 0),),
         ),
         soft_limits=True,
@@ -1109,8 +1132,15 @@ CLIP_ROWS = [
             jog({"X": 1.0}),
             stream(0.2),
             check(lambda h: path_end(h)[0] == pytest.approx(EDGE_MM, abs=1e-9), "at the edge"),
+            check(
+                lambda h: (
+                    [e.text[:39] for e in h.engine.events if e.kind == "info"]
+                    == ["the jog stops at the soft limit (at X -"]
+                ),
+                "says once why it stands while the stick is held",
+            ),
         ],
-        Expect(Phase.JOGGING),
+        Expect(Phase.JOGGING, never=("fault",)),
         soft_limits=True,
     ),
     row(
@@ -1124,7 +1154,7 @@ CLIP_ROWS = [
                 "slid along X's edge to Y's",
             ),
         ],
-        Expect(Phase.JOGGING),
+        Expect(Phase.JOGGING, never=("fault",)),
         soft_limits=True,
     ),
     row(
@@ -1133,8 +1163,14 @@ CLIP_ROWS = [
             jog(),
             stream(0.5),
             check(lambda h: -20.0 < path_end(h)[0] <= -19.98, "just short of the vise"),
+            check(
+                lambda h: any(
+                    "stops at the keep-out zone 'vise'" in e.text for e in h.engine.events
+                ),
+                "says why it stands",
+            ),
         ],
-        Expect(Phase.JOGGING),
+        Expect(Phase.JOGGING, never=("fault",)),
         keepouts=(KeepOut("vise", (-30.0, -5.0, -100.0), (-20.0, 5.0, 0.0)),),
     ),
     row(

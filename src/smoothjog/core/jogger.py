@@ -420,6 +420,9 @@ class Jogger:
         self._ratios_version = 0
         #: The increment a cruising jog repeats (None: work the next one out afresh).
         self._cruise: _Cruise | None = None
+        #: What last stopped an increment short, and the stick already told of an edge.
+        self._blocked_by = "the soft limit"
+        self._edge_told: Intent | None = None
         self._block_cache: tuple[inc.VectorMove, EngineLimits, tuple[float, int], float] | None = (
             None
         )
@@ -1000,6 +1003,18 @@ class Jogger:
         """Clip, round and write one increment; the cruise to repeat it, when it may be."""
         clipped = self._clip(start, move, length_mm)
         if clipped is None:
+            if self._intent is not None and self._edge_told is not self._intent:
+                # The stick is still held but there is no room left that way: say why the
+                # machine stands, once for this stick position.
+                self._edge_told = self._intent
+                self.events.append(
+                    EngineEvent(
+                        self._track.est_s,
+                        "info",
+                        f"the jog stops at {self._blocked_by} ({self._where_blocked(start)})",
+                        "jog another way, or change the limits if they are wrong",
+                    )
+                )
             return None
         clipped_move, clipped_mm = clipped
         deltas: dict[str, float] = {}
@@ -1079,12 +1094,14 @@ class Jogger:
                 if t_env < t:
                     t = t_env
                     blocked = axis
+                    self._blocked_by = "the soft limit"
             for zone in self.limits.keepouts:
                 t_in, face = inc.ray_box_entry(start, m.unit_vec, zone.min_mm, zone.max_mm)
                 t_in = max(t_in - inset, 0.0)
                 if t_in < t:
                     t = t_in
                     blocked = face
+                    self._blocked_by = f"the keep-out zone {zone.name!r}"
             if t >= step_mm or blocked is None:
                 return (m, t) if t >= step_mm else None
             # Blocked within a step: drop the blocked axis and slide along the boundary.
@@ -1274,7 +1291,9 @@ class Jogger:
         axes = self.limits.axes
         if isinstance(step, StepIntent):
             i = axes.index(step.axis)
-            d = float(format_number(step.dist_mm, MM_DECIMALS))
+            d = self._step_room_mm(start, i, float(format_number(step.dist_mm, MM_DECIMALS)))
+            if d is None:
+                return None
             end = tuple(s + (d if k == i else 0.0) for k, s in enumerate(start))
             moves = {step.axis: d}
             mode = "G91"
@@ -1313,6 +1332,53 @@ class Jogger:
             start, end, norm(delta), speed_mm_s, move.accel_mm_s2, self._track.length_mm()
         )
         return line, seg
+
+    def _step_room_mm(self, start: Vec, axis: int, dist_mm: float) -> float | None:
+        """dist_mm, or shorter to stop at the inset soft limit or a keep-out (said in words);
+        None (a fault in words) when there is no room at all that way."""
+        unit_vec = tuple(
+            (1.0 if dist_mm > 0 else -1.0) if k == axis else 0.0 for k in range(len(start))
+        )
+        inset = self._inset_mm()
+        room_mm, by = math.inf, ""
+        env = self.limits.envelope
+        if env is not None:
+            lo = tuple(v + inset for v in env.min_mm)
+            hi = tuple(v - inset for v in env.max_mm)
+            room_mm, by = inc.ray_box_exit(start, unit_vec, lo, hi)[0], "the soft limit"
+        for zone in self.limits.keepouts:
+            t_in = max(inc.ray_box_entry(start, unit_vec, zone.min_mm, zone.max_mm)[0] - inset, 0)
+            if t_in < room_mm:
+                room_mm, by = t_in, f"the keep-out zone {zone.name!r}"
+        if room_mm >= abs(dist_mm):
+            return dist_mm
+        name = f"{self.limits.axes[axis]}{'+' if dist_mm > 0 else '-'}"
+        # Toward zero on the 0.001 mm grid, so the shortened step stays inside.
+        short_mm = math.floor(room_mm * 10**MM_DECIMALS) / 10**MM_DECIMALS
+        if short_mm <= 0.0:
+            self._fault_now(
+                self._track.est_s,
+                f"step refused: no room to jog {name}, {by} is there"
+                f" ({self._where_blocked(start)})",
+                "jog the other way",
+            )
+            return None
+        self.events.append(
+            EngineEvent(
+                self._track.est_s,
+                "info",
+                f"step {name} shortened to {short_mm:g} mm (asked {abs(dist_mm):g} mm): {by} is"
+                " there",
+                "",
+            )
+        )
+        return math.copysign(short_mm, dist_mm)
+
+    def _where_blocked(self, start: Vec) -> str:
+        """Where the machine is, for a message about an edge."""
+        return "at " + ", ".join(
+            f"{a} {p:.3f}" for a, p in zip(self.limits.axes, start, strict=True)
+        )
 
     def _path_problem(self, start: Vec, end: Vec) -> str | None:
         """Why a straight jog from start to end is not allowed, or None."""
