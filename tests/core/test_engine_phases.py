@@ -8,6 +8,7 @@ engine runs on its own (tests/core/engine_harness.py routes lines as the host do
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import re
 from collections.abc import Callable, Sequence
@@ -23,6 +24,7 @@ from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepInt
 from smoothjog.core.jogger import EngineLimits, JogTuning, Phase, SendLine
 from smoothjog.core.ledger import ENGINE, Entry
 from smoothjog.core.machine import KeepOut, MachineModel
+from smoothjog.core.realtime import STATUS_QUERY
 from smoothjog.core.responses import Ok, parse_response
 from smoothjog.core.stopper import MAX_RECANCELS
 from tests.core.engine_harness import (
@@ -511,6 +513,30 @@ CANCEL_OWED_ROWS = [
             faults=(DOOR, "jogging stopped: the safety door is open"),
             stats={"cancels": 1},
             stops=((True, 0),),
+        ),
+    ),
+    row(
+        "owed-cancel-cuts-each-stale-line-short-while-its-ok-is-on-the-way",
+        # After the resume the stale lines run on their own; a Jog report is enough to cancel
+        # at once, and the cancel after the last ok (and its sync) still follows.
+        [
+            *JOGGING,
+            report("Door:1"),
+            report("Idle"),
+            sends(),
+            report("Jog"),
+            sends("0x85"),
+            report("Jog"),
+            sends("0x85"),
+            sends(),  # one cancel per report, not one per poll
+            ok_all,
+            report("Jog"),
+            sends("0x85", "G4P0"),
+        ],
+        Expect(
+            Phase.STOPPING,
+            faults=("jogging stopped: the safety door is open",),
+            stats={"cancels": 3},
         ),
     ),
     row(
@@ -1252,3 +1278,23 @@ def test_speed_is_a_fraction_of_each_axis_own_maximum() -> None:
     diag.run(0.2)
     x_mm, z_mm = (float(v) for v in re.findall(r"[XZ](-?[\d.]+)", diag.jog_lines()[-2]))
     assert z_mm / x_mm == pytest.approx(1500 / 5000, rel=0.01)
+
+
+def test_an_owed_cancel_looks_for_the_stale_lines_often() -> None:
+    """After a door with lines unanswered, someone else's resume starts them at any moment:
+    the engine asks for reports as often as the wire allows (15 ms at 115200 baud for a
+    50-byte report at 30 % of the wire), not every 50 ms, until it has cancelled them."""
+    h = EngineHarness()
+    h.intent(ContinuousIntent({"X": -1.0}))
+    h.poll()
+    h.status("Door:1")
+    h.status("Idle")
+    h.poll()
+    asked = []
+    for _ in range(10):
+        h.advance(0.005)
+        if STATUS_QUERY in [getattr(o, "byte", None) for o in h.poll()]:
+            asked.append(h.t)
+            h.status("Idle")
+    assert len(asked) >= 3
+    assert max(b - a for a, b in itertools.pairwise(asked)) <= 0.0155

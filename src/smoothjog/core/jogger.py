@@ -96,6 +96,8 @@ OUTSIDE_LAG_MM = 0.05
 OUTSIDE_LAG_S = 0.03
 #: ... but never more than this: a hold at full speed must be seen within its deceleration.
 OUTSIDE_LAG_CAP_MM = 1.0
+#: Status polling while an owed cancel waits for the stale lines to show themselves.
+OWED_POLL_S = 0.010
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 64
 #: How long a round trip far above the usual (a stall) keeps the queue long.
@@ -453,6 +455,7 @@ class Jogger:
         self._line_bytes = JOG_LINE_BYTES
         self._last_report_bytes = 50  # a Grbl 1.1 report with MPos, FS and Pn
         self._last_report_s = -math.inf
+        self._jog_reported = False  # the last report showed Jog (an owed cancel acts on it)
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
@@ -1436,6 +1439,14 @@ class Jogger:
     def _advance_stop(self, now_s: float, out: list[Output]) -> None:
         if self._stop.phase is StopPhase.WAIT_ACKS:
             if self._jogs_unanswered():
+                if self._stop.cancelled and self._jog_reported:
+                    # An owed cancel (a door, hold or reset left lines unanswered): those lines
+                    # now run on their own. Cut each short as soon as a report shows it moving,
+                    # rather than let it run for the round trip its ok takes; the cancel after
+                    # the last ok still catches what starts later (firmware-facts §3.1).
+                    self._jog_reported = False
+                    out.append(SendRealtime(JOG_CANCEL))
+                    self.stats.cancels += 1
                 if not self._reply_overdue(now_s):
                     return  # a cancel now would let these lines run on (firmware-facts §3.1)
                 # Their replies were lost: the lines ran (or run); cancel whatever moves.
@@ -1582,6 +1593,7 @@ class Jogger:
         self._status_asked_s = None
         self._last_report_bytes = len(report.raw) + 2
         self._last_report_s = now_s
+        self._jog_reported = report.state == "Jog"
         state = report.state
         mpos = self.model.mpos_mm
         lead_mm = 0.0
@@ -1830,6 +1842,14 @@ class Jogger:
     def _poll_interval_s(self) -> float:
         busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
         interval_s = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
+        if self._cancel_owed or (
+            self.phase is Phase.STOPPING
+            and self._stop.phase is StopPhase.WAIT_ACKS
+            and self._stop.cancelled
+        ):
+            # Lines left by a door, hold or reset may start the machine any moment (someone
+            # else resumes it): look often, so the owed cancel comes within a block or two.
+            interval_s = OWED_POLL_S
         # Reports must leave the return wire room for the replies: at 9600 baud a 50-byte
         # report takes 52 ms, so 20 Hz would fill it.
         report = self._last_report_bytes * self._byte_s / REPORT_SHARE
