@@ -96,12 +96,16 @@ OUTSIDE_LAG_MM = 0.05
 OUTSIDE_LAG_S = 0.03
 #: ... but never more than this: a hold at full speed must be seen within its deceleration.
 OUTSIDE_LAG_CAP_MM = 1.0
+#: Queue kept beyond the stopping distance and the committed segments however slow the jog.
+QUEUE_FLOOR_MM = 0.3
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 64
 #: How long a round trip far above the usual (a stall) keeps the queue long.
 RTT_MEMORY_S = 30.0
+#: A round trip over twice the window's slow one plus this is a stall, to be remembered.
+STALL_MIN_S = 0.020
 #: A round trip longer than this is a link that stopped, not one to size a queue for.
 RTT_CAP_S = 0.5
 #: Share of the wire's throughput the engine's own lines may take (the rest: `?`, other owners).
@@ -413,6 +417,8 @@ class Jogger:
         #: When the stop began its current wait, and when the last reply to the engine came.
         self._stop_wait_s = -math.inf
         self._last_reply_s = -math.inf
+        self._prev_sent_s = -math.inf
+        self._services: deque[float] = deque(maxlen=RTT_WINDOW)
         #: The commanded move a Jog report last showed running at its speed.
         self._seen_at_speed: inc.VectorMove | None = None
         #: Pn letters seen while the machine rested (an input that reads active while Idle).
@@ -906,6 +912,7 @@ class Jogger:
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
         block_s = self._block_s(move)
         ahead_s = self._ahead_s(block_s)
+        committed_s = ahead_s - self._rtt_hi_s - self.tuning.link_margin_s
         blocks = self._track.blocks_in_planner()
         for _ in range(n_blocks):
             queued_mm = self._track.queued_mm()
@@ -913,7 +920,13 @@ class Jogger:
             # for the speed it has: the slower blocks must be queued before the faster ones run
             # out, or the planner brakes below the new speed.
             speed_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
-            target_mm = inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, ahead_s)
+            target_mm = max(
+                inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, ahead_s),
+                # A slow jog's queue is little more than its committed segments; keep some
+                # acknowledged path beyond them, or an outside stop would run it all and rest
+                # where a queue that ran dry rests, and could not be told from one.
+                inc.queue_target_mm(speed_mm_s, move.accel_mm_s2, committed_s) + QUEUE_FLOOR_MM,
+            )
             if queued_mm >= target_mm + QUEUE_TOLERANCE_MM:
                 # Nothing to send until the queue has drained to its target.
                 self._wake_at_s = self._run_time_s(now_s, queued_mm - target_mm, move)
@@ -1563,18 +1576,30 @@ class Jogger:
             self._rtts.append(latency_s)
             ranked = sorted(self._rtts)
             self._rtt_s = ranked[(3 * len(ranked)) // 4]
-            # The queue must bridge nearly the slowest round trip the link shows (its jitter
-            # and stalls, firmware-facts §6), not a typical one: the second largest of the
-            # window (about its 97th percentile; one reply held behind a report is ignored).
-            # A stall (a Wi-Fi link pausing every few seconds) is remembered for RTT_MEMORY_S:
-            # the window alone would forget it between two stalls and dip at each.
+            # The queue must bridge the slow end of the round trips the link shows (its jitter,
+            # firmware-facts §6), not a typical one: the 90th percentile of the last
+            # RTT_WINDOW lines that went out first in their poll. (Higher percentiles here are
+            # mostly an ok held behind a status report, and would lengthen every coast.)
+            # (The others of a burst wait behind it in the parser, one after another: they are
+            # not late, and counting them would size every queue for the start of a jog.)
+            if entry.sent_s != self._prev_sent_s:
+                self._services.append(latency_s)
+                # A stall (a Wi-Fi link pausing every few seconds) is remembered for
+                # RTT_MEMORY_S: the window alone would forget it between two stalls.
+                peaks = self._rtt_peaks
+                while peaks and peaks[-1][1] <= latency_s:
+                    peaks.pop()
+                peaks.append((now_s, min(latency_s, RTT_CAP_S)))
+            self._prev_sent_s = entry.sent_s
             peaks = self._rtt_peaks
-            while peaks and peaks[-1][1] <= latency_s:
-                peaks.pop()
-            peaks.append((now_s, latency_s))
-            while peaks[0][0] < now_s - RTT_MEMORY_S:
+            while peaks and peaks[0][0] < now_s - RTT_MEMORY_S:
                 peaks.popleft()
-            self._rtt_hi_s = max(ranked[max(len(ranked) - 2, 0)], min(peaks[0][1], RTT_CAP_S))
+            ranked_s = sorted(self._services) or [latency_s]
+            window_s = ranked_s[(9 * len(ranked_s)) // 10]
+            # The longest of the memory counts only when it stands out from the window (a
+            # stall), so one slow reply does not lengthen the queue for half a minute.
+            peak_s = peaks[0][1] if peaks else 0.0
+            self._rtt_hi_s = peak_s if peak_s > 2.0 * window_s + STALL_MIN_S else window_s
             self._track.ack(pending.seg, now_s)
             return
         # A rejected G91 jog leaves the parser where it was, so every later increment is off:
