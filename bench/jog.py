@@ -1,13 +1,18 @@
 """Runs S1-S7 for smoothjog and the four reference methods; prints the table and writes plots.
 
-Usage: `python -m bench jog [--machines hobby-router,slow-machine] [--phases 5] [--out DIR]`.
+Usage: `python -m bench jog [--machines hobby-router,slow-machine] [--links all] [--phases 5]
+[--out DIR]`. The machines' tables (ideal wire) go to jog.md, the per-link table (bench/links.py)
+to links.md; `--machines ""` or `--links none` leaves one out.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import shlex
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -315,7 +320,17 @@ def plot(plots: dict[str, dict[str, sc.Run]], machine: str, out: Path) -> list[P
 def main(argv: list[str] | None = None) -> int:
     """Run the jog benchmark; returns 0."""
     parser = argparse.ArgumentParser(prog="python -m bench jog")
-    parser.add_argument("--machines", default="hobby-router,slow-machine")
+    parser.add_argument(
+        "--machines",
+        default="hobby-router,slow-machine",
+        help="machines of the ideal-wire tables (jog.md), comma-separated; empty: none",
+    )
+    parser.add_argument(
+        "--links",
+        default="all",
+        help="modelled links of the per-link table (smoothjog.sim.rig.LINK_MODELS), "
+        "comma-separated; all (default) or none",
+    )
     parser.add_argument("--phases", type=int, default=5)
     parser.add_argument("--out", default="bench/results")
     parser.add_argument(
@@ -325,23 +340,47 @@ def main(argv: list[str] | None = None) -> int:
         help="controller clock against the host's (1.003: the controller runs 0.3 %% fast)",
     )
     args = parser.parse_args(argv)
+    from bench import links
+
+    link_names = links.parse_names(args.links)
     sc.CLOCK_RATIO = args.clock_ratio
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    started = time.perf_counter()
     machines = [m for m in args.machines.split(",") if m]
-    results = run_all(machines, args.phases)
+    if machines:
+        print("\n".join(machine_report(machines, args.phases, args.clock_ratio, out)))
+    if link_names:
+        # The command line as typed under `python -m bench`, else as this call's arguments.
+        from_cli = argv is None or Path(sys.argv[0]).parent.name == "bench"
+        argv_used = sys.argv[1:] if from_cli else ["jog", *(argv or [])]
+        pythonpath = os.environ.get("PYTHONPATH", "")
+        command = f"PYTHONPATH={shlex.quote(pythonpath)} .venv/bin/python -m bench " + shlex.join(
+            argv_used
+        )
+        started = time.perf_counter()
+        lines = links.report(link_names, args.phases, out, command)
+        lines.append(f"Wall time: {time.perf_counter() - started:.1f} s")
+        text = "\n".join(lines)
+        (out / "links.md").write_text(text + "\n", encoding="utf-8")
+        print(text)
+    return 0
+
+
+def machine_report(machines: list[str], phases: int, clock_ratio: float, out: Path) -> list[str]:
+    """The ideal-wire tables of every machine, written to jog.md with their plots."""
+    started = time.perf_counter()
+    results = run_all(machines, phases)
     plots = run_all.plots  # type: ignore[attr-defined]
     report: list[str] = ["# Jog benchmark", ""]
     for machine in machines:
         ph = sc.physics(machine)
         report += [
             f"## {machine} (Grbl 1.1h profile, simulated, 115200 baud, soft limits off, "
-            f"controller clock x{args.clock_ratio})",
+            f"controller clock x{clock_ratio})",
             "",
             f"v = {ph.speed_mm_s:.1f} mm/s, a = {ph.accel_mm_s2:.0f} mm/s², "
             f"v²/2a = {ph.stop_mm:.2f} mm, v/a = {ph.stop_s:.3f} s, 2v/a = {2 * ph.stop_s:.3f} s; "
-            f"medians over {args.phases} release phases.",
+            f"medians over {phases} release phases.",
             "",
             *table(results[machine], ph),
             "",
@@ -354,7 +393,7 @@ def main(argv: list[str] | None = None) -> int:
                 *calibration(results[machine]),
                 "",
                 *REFERENCE_NOTES,
-                *phase_sensitivity(machine, args.phases),
+                *phase_sensitivity(machine, phases),
                 "",
             ]
         for path in plot(plots[machine], machine, out):
@@ -363,5 +402,4 @@ def main(argv: list[str] | None = None) -> int:
     report.append(f"Wall time: {time.perf_counter() - started:.1f} s")
     text = "\n".join(report)
     (out / "jog.md").write_text(text + "\n", encoding="utf-8")
-    print(text)
-    return 0
+    return report

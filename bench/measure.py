@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 import operator
@@ -28,6 +29,28 @@ def distance_after(trace: Sequence[TraceSegment], t_s: float) -> float:
         else:
             total += length * (seg.t1_s - t_s) / span
     return total
+
+
+def mean_speed(trace: Sequence[TraceSegment], t0_s: float, t1_s: float) -> float:
+    """Path length travelled over [t0_s, t1_s] divided by its duration (mm/s)."""
+    return (distance_after(trace, t0_s) - distance_after(trace, t1_s)) / (t1_s - t0_s)
+
+
+def position_at(
+    trace: Sequence[TraceSegment], t_s: float, starts_s: Sequence[float] | None = None
+) -> tuple[float, ...]:
+    """Where the machine really was at t_s; starts_s (every segment's t0_s) speeds up the search."""
+    if not trace:
+        return ()
+    starts = starts_s if starts_s is not None else [seg.t0_s for seg in trace]
+    i = bisect.bisect_right(starts, t_s) - 1
+    if i < 0:
+        return trace[0].start_mm
+    seg = trace[i]
+    if t_s >= seg.t1_s or seg.t1_s <= seg.t0_s:
+        return seg.end_mm
+    f = (t_s - seg.t0_s) / (seg.t1_s - seg.t0_s)
+    return tuple(a + f * (b - a) for a, b in zip(seg.start_mm, seg.end_mm, strict=True))
 
 
 def last_motion_end(trace: Sequence[TraceSegment]) -> float:

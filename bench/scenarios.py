@@ -65,9 +65,11 @@ LINK = LinkModel()
 CLOCK_RATIO = 1.0
 
 
-def _session(factory: Factory, machine: str, firmware: str) -> tuple[VirtualHost, float]:
+def _session(
+    factory: Factory, machine: str, firmware: str, link: LinkModel | None = None
+) -> tuple[VirtualHost, float]:
     fw = GrblFirmware(get_firmware_profile(firmware), machine)
-    rig = SimRig(fw, LINK, clock_ratio=CLOCK_RATIO)
+    rig = SimRig(fw, LINK if link is None else link, clock_ratio=CLOCK_RATIO)
     # Soft limits off, as in the real-firmware runs of the reference methods: the printed wiki
     # method queues 16 x 41 mm, which runs past the 800 mm travel and would meet error:15.
     rig.host_send(b"$20=0\n", 0.0)
@@ -96,23 +98,36 @@ def _hold_s(ph: Physics) -> float:
 
 
 def _held(
-    factory: Factory, machine: str, firmware: str, phase_s: float, speed: float = 1.0
+    factory: Factory,
+    machine: str,
+    firmware: str,
+    phase_s: float,
+    speed: float = 1.0,
+    link: LinkModel | None = None,
 ) -> tuple[Physics, VirtualHost, float]:
     """Press the stick toward -X at speed and hold it up to the scenario's event (hold + phase).
 
     Returns the profile's physics, the session and the event time.
     """
     ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
+    vs, t0 = _session(factory, machine, firmware, link)
     vs.set_intent(_stick(speed))
     t_event = t0 + _hold_s(ph) + phase_s
     vs.run_until(t_event)
     return ph, vs, t_event
 
 
-def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed: float) -> Run:
+def release(
+    factory: Factory,
+    machine: str,
+    firmware: str,
+    phase_s: float,
+    speed: float,
+    *,
+    link: LinkModel | None = None,
+) -> Run:
     """S1/S5: hold, then release; distance and time to standstill after the release."""
-    _ph, vs, t_rel = _held(factory, machine, firmware, phase_s, speed)
+    _ph, vs, t_rel = _held(factory, machine, firmware, phase_s, speed, link)
     vs.set_intent(_stick(speed, 0.0))
     vs.run_until_idle(30.0)
     vs.run_until(vs.now_s + 0.5)
@@ -130,10 +145,12 @@ def release(factory: Factory, machine: str, firmware: str, phase_s: float, speed
     return run
 
 
-def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+def hold(
+    factory: Factory, machine: str, firmware: str, phase_s: float, *, link: LinkModel | None = None
+) -> Run:
     """S2: a 6 s hold at full speed: share of time within 2 % of v, and the dips."""
     ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
+    vs, t0 = _session(factory, machine, firmware, link)
     vs.set_intent(_stick(1.0))
     t_end = t0 + max(6.0, 2 * ph.stop_s + 3.0) + phase_s
     vs.run_until(t_end)
@@ -142,14 +159,20 @@ def hold(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
     vs.run_until_idle(30.0)
     # Measured once the trace holds every segment up to t_end (it records finished segments).
     share, dips = measure.hold_quality(vs.rig.trace, window0, t_end, ph.speed_mm_s)
-    run = Run({"within_2pct": share, "dips": float(dips)}, _series(vs, t0, t_end + 1.0))
+    mean = measure.mean_speed(vs.rig.trace, window0, t_end) / ph.speed_mm_s
+    run = Run(
+        {"within_2pct": share, "dips": float(dips), "mean_of_v": mean},
+        _series(vs, t0, t_end + 1.0),
+    )
     vs.close()
     return run
 
 
-def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+def reversal(
+    factory: Factory, machine: str, firmware: str, phase_s: float, *, link: LinkModel | None = None
+) -> Run:
     """S3: full speed one way, then the other: time to full speed the other way."""
-    ph, vs, t_rev = _held(factory, machine, firmware, phase_s)
+    ph, vs, t_rev = _held(factory, machine, firmware, phase_s, link=link)
     # The stick flips through neutral in one instant: each method reacts to both events as it
     # is written (the reference methods cancel at neutral); smoothjog acts on the newest intent.
     vs.set_intent(_stick(1.0, 0.0))
@@ -167,9 +190,11 @@ def reversal(factory: Factory, machine: str, firmware: str, phase_s: float) -> R
     return run
 
 
-def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+def client_dies(
+    factory: Factory, machine: str, firmware: str, phase_s: float, *, link: LinkModel | None = None
+) -> Run:
     """S4: the host dies mid-jog: how far the machine coasts on what was queued."""
-    _ph, vs, t_kill = _held(factory, machine, firmware, phase_s)
+    _ph, vs, t_kill = _held(factory, machine, firmware, phase_s, link=link)
     vs.kill()
     vs.run_until(t_kill + 20.0)
     trace = vs.rig.trace
@@ -184,9 +209,11 @@ def client_dies(factory: Factory, machine: str, firmware: str, phase_s: float) -
     return run
 
 
-def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+def speed_change(
+    factory: Factory, machine: str, firmware: str, phase_s: float, *, link: LinkModel | None = None
+) -> Run:
     """S6: 100 % to 30 %: time to settle within 2 % of the new speed."""
-    ph, vs, t_change = _held(factory, machine, firmware, phase_s)
+    ph, vs, t_change = _held(factory, machine, firmware, phase_s, link=link)
     vs.set_intent(_stick(0.3))
     t_end = t_change + 3 * ph.stop_s + 1.5
     vs.run_until(t_end + 0.1)
@@ -201,10 +228,12 @@ def speed_change(factory: Factory, machine: str, firmware: str, phase_s: float) 
     return run
 
 
-def sine_sweep(factory: Factory, machine: str, firmware: str, phase_s: float) -> Run:
+def sine_sweep(
+    factory: Factory, machine: str, firmware: str, phase_s: float, *, link: LinkModel | None = None
+) -> Run:
     """S7: the stick swept as a 1 Hz sine at half speed: lag of actual behind commanded velocity."""
     ph = physics(machine)
-    vs, t0 = _session(factory, machine, firmware)
+    vs, t0 = _session(factory, machine, firmware, link)
     freq_hz, speed, sample_s = 1.0, 0.5, 0.020
     duration_s = 4.0
     t = 0.0

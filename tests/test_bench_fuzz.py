@@ -1,0 +1,68 @@
+"""The fuzz: its fault injection, its outside-stop detectors, and that it survives a crash."""
+
+from __future__ import annotations
+
+import pytest
+from bench import fuzz
+
+from smoothjog.sim.motion import TraceSegment
+from smoothjog.sim.rig import LINK_MODELS
+
+
+def _seg(t0: float, t1: float, x0: float, x1: float) -> TraceSegment:
+    return TraceSegment(t0, t1, (x0, 0.0, 0.0), (x1, 0.0, 0.0))
+
+
+#: Moving 1.0-1.2 s, at rest until 1.5 s, moving again 1.5-1.6 s.
+TRACE = [
+    _seg(1.0, 1.1, 0.0, 1.0),
+    _seg(1.1, 1.2, 1.0, 1.5),
+    _seg(1.2, 1.5, 1.5, 1.5),
+    _seg(1.5, 1.6, 1.5, 2.0),
+]
+
+
+def test_the_rest_after_an_outside_stop_is_the_end_of_the_motion_going_on() -> None:
+    assert fuzz._moving_at(TRACE, 1.05, 0)
+    assert not fuzz._moving_at(TRACE, 1.3, 0)
+    assert fuzz._rest_after(TRACE, 1.05, 0) == pytest.approx(1.2)
+    assert fuzz._rest_after(TRACE, 1.3, 0) == pytest.approx(1.3)
+
+
+def test_faults_put_the_noise_on_the_directions_asked_for() -> None:
+    up = fuzz.Faults(drop_rate=0.01, corrupt_rate=0.02, directions="to-controller").on(
+        LINK_MODELS["ideal"]
+    )
+    assert (up.drop_to_controller, up.corrupt_to_controller) == (0.01, 0.02)
+    assert (up.drop_to_host, up.corrupt_to_host) == (0.0, 0.0)
+    both = fuzz.Faults(drop_rate=0.01, directions="both").on(LINK_MODELS["ftdi"])
+    assert both.drop_to_host == both.drop_to_controller == 0.01
+    assert both.batch_timer_s == LINK_MODELS["ftdi"].batch_timer_s
+    assert not fuzz.Faults().active
+
+
+def test_outside_events_are_injected_and_counted() -> None:
+    r = fuzz.run_fuzz("grbl", 3, seed=3, link="ideal", faults=fuzz.Faults(outside_rate=1.0))
+    assert r.sequences == 3
+    assert sum(r.outside.values()) >= 3  # one per random intent, at least one intent each
+    assert r.crashes == 0
+
+
+def test_the_fuzz_counts_an_exception_and_carries_on_with_a_fresh_session(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    calls: list[int] = []
+    real_probe = fuzz._probe
+
+    def failing_probe(*args: object) -> None:
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("the engine fell over")
+        real_probe(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(fuzz, "_probe", failing_probe)
+    r = fuzz.run_fuzz("grbl", 3, seed=3, link="ideal", faults=fuzz.Faults(outside_rate=0.01))
+    assert r.sequences == 3
+    assert r.crashes == 1
+    assert len(calls) == 3
+    assert any("the engine fell over" in f for f in r.faults)
