@@ -542,7 +542,7 @@ def test_set_keep_outs_checks_the_axes_against_the_machine() -> None:
     assert "axis A" in str(info.value)
     assert "X Y Z" in str(info.value)
     assert model.keep_outs == (XY_VISE,)  # unchanged by the refusal
-    feed(model, "<Idle|MPos:0.000,0.000,0.000,0.000|FS:0,0>")
+    feed(model, "Grbl 1.1h ['$' for help]", "<Idle|MPos:0.000,0.000,0.000,0.000|FS:0,0>")
     model.set_keep_outs([four])
     assert model.keep_outs == (four,)
 
@@ -581,3 +581,17 @@ def test_any_sequence_of_lines_is_absorbed(lines: list[str]) -> None:
     envelope = model.soft_limit_envelope()
     assert envelope is None or len(envelope.min_mm) == model.n_axes
     assert isinstance(model.looks_unhomed(), bool)
+
+
+def test_a_report_with_another_axis_count_is_damaged_and_keeps_the_last_position() -> None:
+    """A lost comma or digit on a noisy wire changes the coordinate count: not a new machine."""
+    from smoothjog.core.machine import MachineModel
+    from smoothjog.core.responses import parse_response
+
+    model = MachineModel()
+    model.apply(parse_response("<Jog|MPos:-1.000,-2.000,-3.000|FS:500,0>"))
+    model.apply(parse_response("<Jog|MPos:-1.100,-2.000|FS:500,0>"))
+    assert model.mpos_mm == (-1.0, -2.0, -3.0)
+    assert model.damaged_reports == 1
+    model.apply(parse_response("<Jog|MPos:-1.200,-2.000,-3.000|FS:500,0>"))
+    assert model.mpos_mm == (-1.2, -2.0, -3.0)

@@ -298,6 +298,8 @@ class MachineModel:
     last_error: int | None = None
     last_message: str | None = None
     keep_outs: tuple[KeepOut, ...] = ()
+    #: Status reports whose axis count differed from the controller's (damaged on the wire).
+    damaged_reports: int = 0
     _axis_letters: tuple[str, ...] | None = field(default=None, init=False, repr=False)
     _opt_blocks: int | None = field(default=None, init=False, repr=False)
     _opt_rx_bytes: int | None = field(default=None, init=False, repr=False)
@@ -505,9 +507,14 @@ class MachineModel:
             wpos = tuple(m - o + 0.0 for m, o in zip(mpos, wco, strict=True))
         if wpos is not None and mpos is None and wco is not None and len(wco) == len(wpos):
             mpos = tuple(w + o + 0.0 for w, o in zip(wpos, wco, strict=True))
-        if mpos is not None or wpos is not None:
+        axes = len(mpos if mpos is not None else wpos or ())
+        if axes and self._report_axes and axes != self._report_axes:
+            # The controller's axis count does not change mid-session: a report with another
+            # count was damaged on the wire (a lost comma or digit). Keep the last positions.
+            self.damaged_reports += 1
+        elif mpos is not None or wpos is not None:
             self.mpos_mm, self.wpos_mm = mpos, wpos
-            self._report_axes = len(mpos if mpos is not None else wpos or ())
+            self._report_axes = axes
         if report.feed is not None:
             self.feed_mm_min = self._to_mm(report.feed)
         self.spindle_rpm = report.spindle_speed
@@ -538,6 +545,7 @@ class MachineModel:
         self.state, self.substate = None, None
         self.wpos_mm, self.wco_mm = None, None
         self.buffer = None
+        self._report_axes = None  # a rebuilt or reconfigured controller may have other axes
         # A reboot may come back with another planner size (grblHAL's `$398` takes effect only
         # then, firmware-facts §7): measure it again in the next Idle report.
         self._idle_planner_free_max = None
