@@ -49,7 +49,7 @@ class JogConfig:
     # Fraction (0, 1] of each axis's `$11x` maximum rate; axes not listed use 1.
     speed_ratios: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     default_speed: float = 0.5  # fraction (0, 1] of the full jog speed at start-up
-    link_margin_s: float = 0.005  # queue time added for the host's scheduling and link jitter
+    link_margin_s: float = 0.0  # queue time added to what the engine measures of the link
 
     def ratio(self, axis: str) -> float:
         """The speed ratio of one axis (1.0 when not configured)."""
@@ -244,7 +244,7 @@ def _jog(table: _Table) -> JogConfig:
             raise table.error(key, "is given twice (letters are not case-sensitive)")
         ratios[letter] = table.check_number(key, value, above=0.0, at_most=1.0)
     default_speed = table.number("default_speed", 0.5, above=0.0, at_most=1.0)
-    link_margin_s = table.number("link_margin_s", 0.005, at_least=0.0, at_most=MAX_LINK_MARGIN_S)
+    link_margin_s = table.number("link_margin_s", 0.0, at_least=0.0, at_most=MAX_LINK_MARGIN_S)
     table.finish()
     return JogConfig(
         speed_ratios=MappingProxyType(ratios),

@@ -90,3 +90,22 @@ def _answers_for(h: EngineHarness, seconds: float) -> None:
         h.advance(0.002)
         h.ok_all()
         h.poll()
+
+
+def test_a_host_that_wakes_late_gets_a_longer_queue() -> None:
+    """Woken 4 ms after each planned top-up (a busy computer): the queue grows by that much."""
+    on_time = EngineHarness()
+    _held(on_time, 1.0)
+    late = EngineHarness()
+    late.rest_at(START_MPOS)
+    late.intent(HELD)
+    end_s = late.t + 1.0
+    while late.t < end_s:
+        deadline_s = late.engine.next_deadline_s(late.t)
+        late.t = max(deadline_s + 0.004, late.t + 0.002)
+        late.ok_all()
+        late.poll()
+    assert late.engine._lateness_s >= 0.0039
+    assert on_time.engine._lateness_s <= 0.002
+    grown_s = late.engine._ahead_s(0.0105) - on_time.engine._ahead_s(0.0105)
+    assert grown_s >= 0.0035

@@ -20,6 +20,7 @@ def _released_with_one_reply_lost() -> EngineHarness:
     h.rest_at(START_MPOS)
     h.intent(HELD)
     h.run(0.5)
+    h.status("Jog", h.engine._track.point_at(h.engine._track.x_est_mm), fs=(5000, 0))
     h.ok_all()
     while not h.unanswered():  # on to the next top-up
         h.advance(0.002)

@@ -172,9 +172,9 @@ class JogTuning:
     #: Shortest block duration: the jogging doc's conservative 10 ms for the parser to keep up,
     #: plus 0.5 ms so each block is one full 10 ms segment and a short one (increments.committed_s).
     dt_floor_s: float = 0.0105
-    #: Extra queue time on top of the measured round trip, for jitter of the host's scheduling
-    #: and of the link. Nothing jitters in virtual time, so the engine's default is 0; the
-    #: real-time commands take it from the config ([jog] link_margin_s, 5 ms by default).
+    #: Extra queue time on top of what the engine measures (the slow end of the round trips,
+    #: remembered stalls, and how late the host wakes it for a top-up). 0 by default; the
+    #: real-time commands take it from the config ([jog] link_margin_s).
     link_margin_s: float = 0.0
     #: The shortest wait between two polls the engine asks for (it plans its own wake-ups).
     tick_s: float = 0.001
@@ -418,6 +418,9 @@ class Jogger:
         self._stop_wait_s = -math.inf
         self._last_reply_s = -math.inf
         self._prev_sent_s = -math.inf
+        #: How late the host woke the engine for its planned top-ups (90th percentile).
+        self._late_s: deque[float] = deque(maxlen=RTT_WINDOW)
+        self._lateness_s = 0.0
         self._services: deque[float] = deque(maxlen=RTT_WINDOW)
         #: The commanded move a Jog report last showed running at its speed.
         self._seen_at_speed: inc.VectorMove | None = None
@@ -462,6 +465,7 @@ class Jogger:
         self._last_report_bytes = 50  # a Grbl 1.1 report with MPos, FS and Pn
         self._last_report_s = -math.inf
         self._jog_reported = False  # the last report showed Jog (an owed cancel acts on it)
+        self._idle_since_s: float | None = None  # the first of the Idle reports in a row
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
@@ -734,6 +738,12 @@ class Jogger:
             # only a status query can be owed; a held jog comes here some 20 times a second.
             self._poll_status(now_s, out)
             return out
+        if self._wake_at_s is not None and now_s > self._wake_at_s:
+            # Woken late for a planned top-up (a busy host, a slow timer): the queue drained
+            # that much further, so it is sized for the late end of such wake-ups as well.
+            self._late_s.append(now_s - self._wake_at_s)
+            ranked = sorted(self._late_s)
+            self._lateness_s = ranked[(9 * len(ranked)) // 10]
         self._changed = False
         self._wake_at_s = None
         self._rx_blocked = False
@@ -855,7 +865,7 @@ class Jogger:
         """
         longest_s = self._track.longest_queued_s(block_s)
         committed = min(inc.committed_s(longest_s), self.tuning.committed_s)
-        return committed + self._rtt_hi_s + self.tuning.link_margin_s
+        return committed + self._rtt_hi_s + self._lateness_s + self.tuning.link_margin_s
 
     def _block_s(self, move: inc.VectorMove) -> float:
         """Duration of one increment at this speed: just over one 10 ms segment when possible.
@@ -912,7 +922,7 @@ class Jogger:
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
         block_s = self._block_s(move)
         ahead_s = self._ahead_s(block_s)
-        committed_s = ahead_s - self._rtt_hi_s - self.tuning.link_margin_s
+        committed_s = ahead_s - self._rtt_hi_s - self._lateness_s - self.tuning.link_margin_s
         blocks = self._track.blocks_in_planner()
         for _ in range(n_blocks):
             queued_mm = self._track.queued_mm()
@@ -1423,8 +1433,12 @@ class Jogger:
         """
         since_s = max(self._stop_wait_s, self._last_reply_s)
         limit_s = max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
-        at_rest = self.model.state == "Idle" and self._last_report_s > since_s
-        return now_s - since_s > (limit_s if at_rest else 8.0 * limit_s)
+        idle_s = self._idle_since_s
+        if idle_s is not None:
+            # Reported at rest (every report since the first Idle one) for limit_s of the wait:
+            # nothing can still be running that the reply would wait for.
+            return now_s - max(idle_s, since_s) > limit_s
+        return now_s - since_s > 8.0 * limit_s
 
     def _presume_lost(self, now_s: float, kinds: tuple[str, ...]) -> int:
         """Release the engine's unanswered lines of these kinds as answered; say so."""
@@ -1619,6 +1633,10 @@ class Jogger:
         self._last_report_bytes = len(report.raw) + 2
         self._last_report_s = now_s
         self._jog_reported = report.state == "Jog"
+        if report.state != "Idle":
+            self._idle_since_s = None
+        elif self._idle_since_s is None:
+            self._idle_since_s = now_s
         state = report.state
         mpos = self.model.mpos_mm
         lead_mm = 0.0
