@@ -311,8 +311,8 @@ def report(names: list[str], phases: int, out: Path, command: str) -> list[str]:
         "",
         "In brackets after the S1 and S5 distances: the lowest and highest over the phases. "
         "Both smoothjog rows are the engine as it is; the tuning column says which JogTuning the "
-        "host built it with. Neither passes the link's byte time to the engine (JogTuning.byte_s "
-        "stays at 115200 baud's), as the CLI does not either.",
+        "host built it with. In both, the host hands the engine the modelled wire's byte time "
+        "(Link.byte_time_s), as the CLI's serial link does with its baud rate.",
         "",
     ]
     for path in plot(plots, rows, out):
