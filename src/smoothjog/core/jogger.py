@@ -1073,26 +1073,27 @@ class Jogger:
             deltas_mm=delta_vec,
             seg_len_mm=seg_len,
             unit_vec=ray,
-            clear_mm=self._clear_mm(start, ray),
+            clear_mm=self._room_along(start, ray)[0],
             run_mm=0.0,
             next_start_mm=start,
         )
         return line, delta_vec, seg_len, cruise
 
-    def _clear_mm(self, start: Vec, ray: Vec) -> float:
+    def _room_along(self, start: Vec, ray: Vec) -> tuple[float, str]:
         """How far from start along ray the machine stays inside the inset envelope and clear of
-        every inset keep-out (what _clip would allow an increment of any length)."""
+        every inset keep-out (inf if nothing stops it), and what stops it there."""
         inset = self._inset_mm()
-        clear = math.inf
+        room_mm, by = math.inf, ""
         env = self.limits.envelope
         if env is not None:
             lo = tuple(v + inset for v in env.min_mm)
             hi = tuple(v - inset for v in env.max_mm)
-            clear = inc.ray_box_exit(start, ray, lo, hi)[0]
+            room_mm, by = inc.ray_box_exit(start, ray, lo, hi)[0], "the soft limit"
         for zone in self.limits.keepouts:
-            t_in = inc.ray_box_entry(start, ray, zone.min_mm, zone.max_mm)[0]
-            clear = min(clear, max(t_in - inset, 0.0))
-        return clear
+            t_in = max(inc.ray_box_entry(start, ray, zone.min_mm, zone.max_mm)[0] - inset, 0.0)
+            if t_in < room_mm:
+                room_mm, by = t_in, f"the keep-out zone {zone.name!r}"
+        return room_mm, by
 
     def _clip(
         self, start: Vec, move: inc.VectorMove, length_mm: float
@@ -1299,17 +1300,7 @@ class Jogger:
     def _wheel_room_mm(self, start: Vec, axis: int, sign: int) -> float:
         """How far a handwheel move may go from start along one axis (inf if nothing stops it)."""
         unit_vec = tuple(float(sign) if k == axis else 0.0 for k in range(len(start)))
-        inset = self._inset_mm()
-        room_mm = math.inf
-        env = self.limits.envelope
-        if env is not None:
-            lo = tuple(v + inset for v in env.min_mm)
-            hi = tuple(v - inset for v in env.max_mm)
-            room_mm = inc.ray_box_exit(start, unit_vec, lo, hi)[0]
-        for zone in self.limits.keepouts:
-            t_in = inc.ray_box_entry(start, unit_vec, zone.min_mm, zone.max_mm)[0]
-            room_mm = min(room_mm, max(t_in - inset, 0.0))
-        return room_mm
+        return self._room_along(start, unit_vec)[0]
 
     def _step_line(self, step: StepIntent | GotoIntent) -> tuple[str, PathSeg] | None:
         start = self._track.end_mm
@@ -1365,17 +1356,7 @@ class Jogger:
         unit_vec = tuple(
             (1.0 if dist_mm > 0 else -1.0) if k == axis else 0.0 for k in range(len(start))
         )
-        inset = self._inset_mm()
-        room_mm, by = math.inf, ""
-        env = self.limits.envelope
-        if env is not None:
-            lo = tuple(v + inset for v in env.min_mm)
-            hi = tuple(v - inset for v in env.max_mm)
-            room_mm, by = inc.ray_box_exit(start, unit_vec, lo, hi)[0], "the soft limit"
-        for zone in self.limits.keepouts:
-            t_in = max(inc.ray_box_entry(start, unit_vec, zone.min_mm, zone.max_mm)[0] - inset, 0)
-            if t_in < room_mm:
-                room_mm, by = t_in, f"the keep-out zone {zone.name!r}"
+        room_mm, by = self._room_along(start, unit_vec)
         if room_mm >= abs(dist_mm):
             return dist_mm
         name = f"{self.limits.axes[axis]}{'+' if dist_mm > 0 else '-'}"
