@@ -67,6 +67,7 @@ class RecordingBackend:
         self.fail_on: set[str] = set()
         self._held: tuple[dict[str, float], float] | None = None
         self._last_view_s: float | None = None
+        self._scripted_state: object = None
 
     @staticmethod
     def now_s() -> float:
@@ -130,8 +131,14 @@ class RecordingBackend:
         return {str(k): float(v) for k, v in raw.items()}
 
     def set_view(self, **changes: object) -> None:
-        """Change some keys of the scripted view."""
+        """Change some keys of the scripted view.
+
+        A scripted state other than Idle or Jog (Alarm, Hold, Door) stays what the view reports
+        while the crude motion runs down, as the machine's own report would.
+        """
         self.view_state.update(changes)
+        if "state" in changes:
+            self._scripted_state = changes["state"]
 
     def named(self, name: str, since_s: float = -math.inf) -> list[Call]:
         """The calls of one method at or after since_s."""
@@ -187,7 +194,7 @@ class RecordingBackend:
                 "actual_speed_mm_s": actual if moving else 0.0,
                 "feed_mm_min": commanded * 60.0,
                 "moving": moving,
-                "state": "Jog" if moving else self._rest_state(),
+                "state": self._state(moving),
                 "stop_point_mpos": stop if moving else None,
                 "queue": {
                     "queued_mm": commanded * 0.3,
@@ -197,6 +204,10 @@ class RecordingBackend:
             }
         )
 
-    def _rest_state(self) -> object:
+    def _state(self, moving: bool) -> object:
+        if self._scripted_state not in (None, "Idle", "Jog"):
+            return self._scripted_state
+        if moving:
+            return "Jog"
         state = self.view_state.get("state")
         return "Idle" if state == "Jog" else state
