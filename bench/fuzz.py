@@ -30,9 +30,10 @@ from dataclasses import dataclass, field
 from bench import measure
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineEvent, Jogger
+from smoothjog.core.jogger import EngineEvent, Jogger, Phase
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.responses import GcodeModes
+from smoothjog.core.stopper import StopPhase
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import TraceSegment
 from smoothjog.sim.profiles import get_firmware_profile
@@ -108,6 +109,9 @@ class FuzzReport:
     #: With noise toward the host: stops the engine checked against a reported position more
     #: than a step off the real one; their tracked error is not counted above.
     stops_on_a_wrong_report: int = 0
+    #: Stops that ended a jog someone else had stopped first: the lines left in the controller
+    #: ran off the tracked path, so their tracked error is not counted above.
+    stops_after_outside: int = 0
     #: Faults claiming something outside smoothjog stopped or moved the machine: nothing does in
     #: runs without outside events or noise, so each one is a false alarm of the engine.
     false_outside_alarms: int = 0
@@ -116,6 +120,12 @@ class FuzzReport:
     #: (a hold or cancel while it moved) or reset it.
     outside: dict[str, int] = field(default_factory=dict)
     outside_stops: int = 0
+    #: Outside holds and cancels sent while smoothjog's own cancel was already on the wire
+    #: (they stop nothing, so they are not outside stops).
+    outside_during_own_cancel: int = 0
+    #: The longest motion of one such restart (lines left in the controller's buffer that ran
+    #: before smoothjog's cancel caught them), mm.
+    worst_restart_mm: float = 0.0
     #: The machine moved again after an outside stop, before any new press.
     restarts_after_outside_stop: int = 0
     #: A fresh press moved the machine less than PROBE_MIN_MM and the engine reported no fault.
@@ -220,6 +230,11 @@ class _Session:
                     f"stop at {stop.t_s:.3f} s checked against a report {off:.1f} steps off the "
                     f"real position (last outside event before it: {last})"
                 )
+                continue
+            if stop.after_outside_stop:
+                # The path it tracked was broken by someone else's stop; the engine re-reads
+                # the position (the next stop is judged again).
+                report.stops_after_outside += 1
                 continue
             report.worst_tracking_steps = max(report.worst_tracking_steps, stop.tracked_error_steps)
             if stop.tracked_error_steps > 1.0 + 1e-9:
@@ -358,6 +373,11 @@ def _stop_and_check(session: _Session, report: FuzzReport, idle_timeout_s: float
             ):
                 report.envelope_crossings += 1
         if _enters(VISE, seg.start_mm, seg.end_mm):
+            if not report.keepout_entries:
+                report.faults.append(
+                    f"keep-out: the machine moved inside the vise at {seg.t0_s:.3f} s"
+                    f" ({_fmt(seg.start_mm)} to {_fmt(seg.end_mm)})"
+                )
             report.keepout_entries += 1
     session.checked_upto = len(trace)
     return idle
@@ -397,6 +417,14 @@ def _fault_sequence(
             byte = OUTSIDE_EVENTS[kind]
             if byte is None:
                 vs.rig.inject_stall(frng.uniform(*STALL_RANGE_S), max(vs.now_s, vs.rig.now_s))
+            elif _own_cancel_sent(session.engine):
+                # smoothjog's own 0x85 is already on its way: a hold or cancel behind it on
+                # the same wire finds the jog cancel under way and changes nothing
+                # (firmware-facts §3.1), and a press made before it may rightly go on.
+                report.outside_during_own_cancel += kind != "soft reset"
+                if kind == "soft reset":
+                    stops.append((vs.now_s, kind))
+                session.send_outside(byte)
             else:
                 stops.append((vs.now_s, kind))
                 session.send_outside(byte)
@@ -421,12 +449,23 @@ def _fault_sequence(
         if again:
             report.restarts_after_outside_stop += 1
             moved = measure.distance_after(again, again[0].t0_s)
+            report.worst_restart_mm = max(report.worst_restart_mm, moved)
             was = "moving" if rest > t else "at rest"
             report.faults.append(
                 f"restart: {kind} at {t:.3f} s (machine {was}), at rest at {rest:.3f} s, moving "
                 f"again at {again[0].t0_s:.3f} s ({moved:.2f} mm) with no new press"
             )
     return idle
+
+
+def _fmt(p: tuple[float, ...]) -> str:
+    return ",".join(f"{v:.3f}" for v in p)
+
+
+def _own_cancel_sent(engine: Jogger) -> bool:
+    """True while the engine's own stop has sent its 0x85 and waits for the sync line."""
+    stop = engine._stop
+    return engine.phase is Phase.STOPPING and stop.phase is StopPhase.WAIT_SYNC and stop.cancelled
 
 
 def _moving_at(trace: list[TraceSegment], t_s: float, start: int) -> bool:
@@ -568,12 +607,13 @@ def main(argv: list[str] | None = None) -> int:
     if faults.active:
         print(
             "| firmware | link | sequences | stops | ghost jogs | restarts after outside stop"
-            " | wedged | error:15 | envelope | keep-out | stops > 1 step (worst)"
-            " | stops on a wrong report | never idle"
-            " | crashes | outside events (stops) | bytes lost / flipped | faults reported"
+            " (longest, mm) | wedged | error:15 | envelope | keep-out | stops > 1 step (worst)"
+            " | stops on a wrong report | stops after an outside stop (not judged) | never idle"
+            " | crashes | outside events (stops; behind smoothjog's own cancel)"
+            " | bytes lost / flipped | faults reported"
             " | wall s |"
         )
-        print("|---" * 18 + "|")
+        print("|---" * 19 + "|")
     else:
         print(
             "| firmware | link | sequences | stops | ghost jogs | error:15 | envelope | keep-out"
@@ -590,11 +630,13 @@ def main(argv: list[str] | None = None) -> int:
                 flipped = r.noise[2] + r.noise[3]
                 print(
                     f"| {name} | {link} | {r.sequences} | {r.stops} | {r.ghost_jogs} | "
-                    f"{r.restarts_after_outside_stop} | {r.wedged} | {r.soft_limit_errors} | "
+                    f"{r.restarts_after_outside_stop} ({r.worst_restart_mm:.2f}) | "
+                    f"{r.wedged} | {r.soft_limit_errors} | "
                     f"{r.envelope_crossings} | {r.keepout_entries} | "
                     f"{r.stops_over_one_step} ({r.worst_tracking_steps:.2f}) | "
-                    f"{r.stops_on_a_wrong_report} | {r.never_idle} | "
-                    f"{r.crashes} | {sum(r.outside.values())} ({r.outside_stops}) | "
+                    f"{r.stops_on_a_wrong_report} | {r.stops_after_outside} | {r.never_idle} | "
+                    f"{r.crashes} | {sum(r.outside.values())} ({r.outside_stops}; "
+                    f"{r.outside_during_own_cancel}) | "
                     f"{lost} / {flipped} | {r.faults_reported} | {wall} |",
                     flush=True,
                 )

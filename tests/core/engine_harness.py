@@ -17,7 +17,7 @@ from smoothjog.core.intents import Intent
 from smoothjog.core.jogger import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.ledger import ENGINE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
+from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, parse_response
 
 #: The simple machine: 80 steps/mm, 5000 mm/min, 500 mm/s², 800 mm of travel on every axis.
@@ -270,13 +270,15 @@ Step = Callable[[EngineHarness], None]
 
 
 def kinds(outputs: Sequence[Output]) -> list[str]:
-    """Outputs in short: `$J` for any jog line, the other lines verbatim, `0x85`, `?`."""
+    """Outputs in short: `$J` for any jog line, the other lines verbatim, `0x85`, `?`, `~`."""
     out = []
     for o in outputs:
         if isinstance(o, SendLine):
             out.append("$J" if o.text.startswith("$J=") else o.text)
         else:
-            out.append({JOG_CANCEL: "0x85", STATUS_QUERY: "?"}.get(o.byte, repr(o.byte)))
+            out.append(
+                {JOG_CANCEL: "0x85", STATUS_QUERY: "?", CYCLE_START: "~"}.get(o.byte, repr(o.byte))
+            )
     return out
 
 

@@ -47,7 +47,25 @@ def test_a_jog_that_slows_behind_its_path_is_an_outside_stop_and_is_cancelled() 
     assert "fell 1.9" in _outside_faults(h)[0]  # 2 mm less the report's wire time at speed
     assert h.engine.phase is Phase.STOPPING
     h.ok_all()
-    assert kinds(h.poll())[:2] == ["0x85", "G4P0"]
+    # The machine brakes for someone else's cancel: only the sync goes, no 0x85 of its own
+    # (one that reached Grbl as that cancel ends would leave it suspended, firmware-facts §3.8).
+    assert kinds(h.poll()) == ["G4P0"]
+    # A line that ran after that stop shows up speeding up again: that one is cancelled.
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(600, 0))
+    h.status("Jog", _estimate_mm(h, behind_mm=1.9), fs=(1500, 0))
+    assert kinds(h.poll())[:1] == ["0x85"]
+
+
+def test_an_outside_stop_seen_at_rest_in_jog_sends_no_cancel_into_its_end() -> None:
+    # Jog with FS:0 short of the queued path: the outside cancel is ending (firmware-facts §3.7).
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
+    assert _outside_faults(h), h.fault_texts()
+    assert "stood still" in _outside_faults(h)[0]
+    out = kinds(h.poll())
+    assert "0x85" not in out
+    h.ok_all()
+    assert "0x85" not in kinds(h.poll())
 
 
 def test_a_report_as_late_as_its_query_allows_is_no_outside_stop() -> None:

@@ -37,7 +37,10 @@ def test_a_stop_waiting_for_a_lost_jog_reply_cancels_and_syncs_after_the_timeout
     h.advance(0.3)
     assert [k for k in kinds(h.poll()) if k != "?"] == []  # a late reply is still possible
     h.advance(0.3)
-    assert [k for k in kinds(h.poll()) if k != "?"] == ["0x85", "G4P0"]
+    # Reported Idle yet silent: first `~`, in case a late 0x85 left Grbl suspended
+    # (firmware-facts §3.8), then the cancel and the sync.
+    assert [k for k in kinds(h.poll()) if k != "?"] == ["~", "0x85", "G4P0"]
+    assert h.engine.stats.suspend_releases == 1
     assert any("did not answer 1 line within" in t for t in h.fault_texts())
     assert h.engine.stats.replies_presumed_lost == 1
     assert h.ledger.stats.presumed_answered == 1
@@ -57,7 +60,7 @@ def test_a_lost_sync_reply_syncs_again() -> None:
     h.advance(0.1)
     h.status("Idle", h.path_end())
     h.advance(0.5)  # the G4P0's ok is lost
-    assert [k for k in kinds(h.poll()) if k != "?"] == ["0x85", "G4P0"]
+    assert [k for k in kinds(h.poll()) if k != "?"] == ["~", "0x85", "G4P0"]
     assert any("did not answer 1 line" in t for t in h.fault_texts())
     h.ok()
     h.status("Idle", START_MPOS)
@@ -92,6 +95,7 @@ def test_while_the_machine_still_moves_a_reply_may_wait_for_planner_room() -> No
     h.status("Jog", h.path_end())
     assert [k for k in kinds(h.poll()) if k != "?"] == []
     h.advance(2.5)  # far longer than any planner wait: presumed lost after all
+    # Still reported Jog: no `~` (it would resume a hold), only the cancel and the sync.
     assert [k for k in kinds(h.poll()) if k != "?"] == ["0x85", "G4P0"]
 
 
@@ -108,3 +112,22 @@ def test_replies_that_keep_coming_are_never_presumed_lost() -> None:
         h.poll()
     assert h.engine.stats.replies_presumed_lost == 0
     assert not any("did not answer" in t for t in h.fault_texts())
+
+
+def test_a_silent_idle_grblhal_gets_no_cycle_start() -> None:
+    # Only Grbl 1.1h is known to suspend in Idle on a late 0x85; elsewhere `~` is not sent.
+    h = EngineHarness(limits={"firmware": "grblhal"})
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    h.run(0.5)
+    h.ok_all()
+    while not h.unanswered():
+        h.advance(0.002)
+        h.poll()
+    h.intent(StopIntent())
+    h.poll()
+    h.advance(0.1)
+    h.status("Idle", h.path_end())
+    h.advance(0.6)
+    assert "~" not in kinds(h.poll())
+    assert h.engine.stats.replies_presumed_lost == 1

@@ -121,6 +121,29 @@ def test_a_status_report_wants_a_poll_only_when_it_changes_something(
     assert h.engine.on_response(resp, h.t) is wants_poll
 
 
+def test_a_routine_report_wants_a_poll_when_the_next_top_up_comes_after_the_next_query() -> None:
+    # A long block (a slowdown, a slide along an edge) can put the next top-up 200 ms away:
+    # the report's poll must re-arm the 50 ms status deadline, or the engine looks at the
+    # machine four times less often (and sees an outside stop that much later).
+    h = EngineHarness()
+    h.status("Idle", START_MPOS)
+    h.intent(ContinuousIntent({"X": -1.0}, 1.0))
+    _drive(h, 0.5)
+    h.poll()
+    h.engine._track.update_estimate(h.t)
+    age_s = (len(status_line("Jog", START_MPOS)) + 2) * h.engine._byte_s
+    along_mm = h.engine._track.x_est_mm - h.engine._track.v_est_mm_s * age_s
+    from smoothjog.core.responses import parse_response
+
+    resp = parse_response(
+        status_line("Jog", (START_MPOS[0] - along_mm, *START_MPOS[1:]), (5000, 0))
+    )
+    h.model.apply(resp)
+    h.engine._wake_at_s = h.t + 0.2  # the top-up a 200 ms block plans
+    assert h.engine.on_response(resp, h.t)
+    assert h.engine.next_deadline_s(h.t) <= h.t + 0.06
+
+
 def test_a_poll_between_top_ups_sends_only_the_status_query_when_it_is_due() -> None:
     h = EngineHarness()
     h.status("Idle", START_MPOS)

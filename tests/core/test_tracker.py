@@ -169,17 +169,23 @@ def test_speed_cap_brakes_for_the_junction_ahead() -> None:
 
 
 @pytest.mark.parametrize(
-    ("n_segs", "seg_mm", "kept"),
+    ("n_segs", "seg_mm", "speed_mm_s", "kept"),
     [
-        (200, 0.5, 41),  # 20 mm kept behind the estimate at the end of 100 mm
-        (200, 0.05, PATH_KEEP_SEGMENTS),  # many short jogs: capped in number
-        (200, 0.005, 200),  # never drop the last millimetre, however many jogs it holds
+        (200, 0.5, 50.0, 41),  # 20 mm kept behind the estimate at the end of 100 mm
+        (200, 0.05, 1.0, PATH_KEEP_SEGMENTS),  # many short, slow jogs: capped in number
+        # ... but never within what a report 0.3 s late can show at the speed jogged
+        # (1 mm + 50 mm/s x 0.3 s = 16 mm: 320 jogs, and the one ending right there), however
+        # the estimate has braked.
+        (1000, 0.05, 50.0, 321),
+        (200, 0.005, 1.0, 200),  # never drop the last millimetre, however many jogs it holds
     ],
 )
-def test_pruning_keeps_the_recent_path(n_segs: int, seg_mm: float, kept: int) -> None:
+def test_pruning_keeps_the_recent_path(
+    n_segs: int, seg_mm: float, speed_mm_s: float, kept: int
+) -> None:
     track = tracker()
     for i in range(n_segs):
-        add(track, ((i + 1) * seg_mm, 0.0, 0.0))
+        add(track, ((i + 1) * seg_mm, 0.0, 0.0), speed_mm_s)
     track.x_est_mm = track.length_mm()
     track.prune()
     assert len(track.path) == kept

@@ -247,3 +247,54 @@ def ray_box_entry(
         # Already inside (moved there by other means): let the user drive out rather than trap them.
         return math.inf, None
     return t_enter, face
+
+
+def sweep_enters_box(
+    a_mm: Sequence[float],
+    b_mm: Sequence[float],
+    d_mm: Sequence[float],
+    lo_mm: Sequence[float],
+    hi_mm: Sequence[float],
+) -> bool:
+    """True when a move d_mm, started from any point between a_mm and b_mm, passes through the
+    box's open interior.
+
+    The region swept is the parallelogram {a + s(b - a) + t d : s, t in [0, 1]}. Each slab of the
+    box bounds s and t linearly, so the unit square of (s, t) is clipped by two half-planes per
+    bounded axis; anything left over is a start point and a time at which the move is inside.
+    Axes the box does not name are unbounded (as in ray_box_entry).
+    """
+    lo_all, hi_all = _box_over(len(a_mm), lo_mm, hi_mm)
+    poly = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    for a, b, d, lo, hi in zip(a_mm, b_mm, d_mm, lo_all, hi_all, strict=True):
+        e = b - a
+        # lo < a + s e + t d < hi, as two constraints of the form k_s s + k_t t < c.
+        for k_s, k_t, c in ((e, d, hi - a), (-e, -d, a - lo)):
+            if math.isinf(c):
+                continue
+            poly = _clip_half_plane(poly, k_s, k_t, c)
+            if not poly:
+                return False
+    return True
+
+
+def _clip_half_plane(
+    poly: list[tuple[float, float]], k_s: float, k_t: float, c: float
+) -> list[tuple[float, float]]:
+    """The part of a convex polygon where k_s s + k_t t < c (Sutherland-Hodgman, one edge)."""
+
+    def inside(p: tuple[float, float]) -> bool:
+        return k_s * p[0] + k_t * p[1] < c
+
+    out: list[tuple[float, float]] = []
+    for i, p in enumerate(poly):
+        q = poly[(i + 1) % len(poly)]
+        p_in, q_in = inside(p), inside(q)
+        if p_in:
+            out.append(p)
+        if p_in != q_in:
+            fp = k_s * p[0] + k_t * p[1] - c
+            fq = k_s * q[0] + k_t * q[1] - c
+            u = fp / (fp - fq)
+            out.append((p[0] + u * (q[0] - p[0]), p[1] + u * (q[1] - p[1])))
+    return out

@@ -27,7 +27,7 @@ from smoothjog.core import increments as inc
 from smoothjog.core.codes import ERR_SYSTEM_GC_LOCK, ERR_TRAVEL_EXCEEDED, alarm_info, error_info
 from smoothjog.core.defaults import DEFAULT_STEP_IDLE_DELAY_MS
 from smoothjog.core.errors import JogBuildError
-from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD, for_model
+from smoothjog.core.firmware import BITS_PER_BYTE_8N1, DEFAULT_BAUD, firmware_facts, for_model
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import (
     ContinuousIntent,
@@ -41,7 +41,7 @@ from smoothjog.core.intents import (
 from smoothjog.core.jogline import MM_DECIMALS, build_jog_line, format_number
 from smoothjog.core.ledger import ENGINE, Entry, Ledger
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL, STATUS_QUERY
+from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import (
     AlarmReply,
     Banner,
@@ -335,6 +335,10 @@ class StopRecord:
     tracked_error_mm: float
     tracked_error_steps: float  # the worst axis, in its own steps
     mpos_mm: Vec
+    #: Something else stopped the machine first (an outside stop, a door, hold or reset): the
+    #: lines it left ran from wherever that stop ended, off the path the engine tracked, so
+    #: the tracked error measures that stop, not the engine's estimate.
+    after_outside_stop: bool = False
 
 
 @dataclass
@@ -343,6 +347,8 @@ class EngineStats:
 
     lines_sent: int = 0
     jogs_sent: int = 0
+    #: `~` sent to a Grbl that reported Idle but answered nothing (firmware-facts §3.8).
+    suspend_releases: int = 0
     cancels: int = 0
     recancels: int = 0
     #: Replies to the engine's lines that never came and were presumed lost on the link.
@@ -424,6 +430,8 @@ class Jogger:
         self._services: deque[float] = deque(maxlen=RTT_WINDOW)
         #: The commanded move a Jog report last showed running at its speed.
         self._seen_at_speed: inc.VectorMove | None = None
+        #: A report of this run showed the machine at its commanded speed, with no stall since.
+        self._cruised = False
         #: Pn letters seen while the machine rested (an input that reads active while Idle).
         self._rest_pins = ""
         self._pins_warned = ""
@@ -464,7 +472,13 @@ class Jogger:
         self._line_bytes = JOG_LINE_BYTES
         self._last_report_bytes = 50  # a Grbl 1.1 report with MPos, FS and Pn
         self._last_report_s = -math.inf
-        self._jog_reported = False  # the last report showed Jog (an owed cancel acts on it)
+        #: The last report showed a jog running and not braking (Jog, a speed above 0 and no
+        #: lower than the report before): an owed cancel may act on it (see _owed_cancel_now).
+        self._jog_unbraked = False
+        self._prev_feed_mm_min: float | None = None  # FS of the last report, None if not Jog
+        #: A jog cancel (smoothjog's or an outside one) may still be ending: no report since
+        #: showed a state other than Jog or a jog running unbraked.
+        self._cancel_ending = False
         self._idle_since_s: float | None = None  # the first of the Idle reports in a row
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
@@ -675,9 +689,13 @@ class Jogger:
         if isinstance(resp, StatusReport):
             fault = self._fault
             lead_mm = self._on_status(resp, now_s)
+            wake_s = self._wake_at_s
             return not (
                 self.phase is Phase.JOGGING
-                and self._wake_at_s is not None  # a planned top-up will poll soon
+                # A planned top-up polls before the next status query is due (a long block's
+                # top-up can be far off: the report must not leave the next `?` waiting on it).
+                and wake_s is not None
+                and wake_s <= self._status_due_s()
                 and resp.state == "Jog"
                 and lead_mm <= ROUTINE_LEAD_MM
                 and not self._pending_desync
@@ -800,7 +818,7 @@ class Jogger:
         elif self._status_urgent():
             due_s = now_s
         else:
-            due_s = self._last_status_sent_s + self._poll_interval_s()
+            due_s = self._status_due_s()
         if self.phase is Phase.JOGGING and self._wake_at_s is not None:
             due_s = min(due_s, self._wake_at_s)
         elif self.phase in (Phase.SETTLING, Phase.STEPPING):
@@ -1001,6 +1019,12 @@ class Jogger:
         end = tuple(s + d for s, d in zip(start, deltas, strict=True))
         if not self._fits_envelope(end):
             return False
+        if self.limits.keepouts and not self._ghost_clear(deltas):
+            # Sent now, this line would run from wherever an outside stop left the machine
+            # (firmware-facts §3.1) and could cut into a keep-out: wait until the machine has
+            # come far enough along the path (a turn around a zone's corner is not blended).
+            self._wake_at_s = now_s + self.tuning.settle_tick_s
+            return False
         if not self._fits_rx(line):
             self._rx_blocked = True
             return False
@@ -1078,6 +1102,37 @@ class Jogger:
             next_start_mm=start,
         )
         return line, delta_vec, seg_len, cruise
+
+    def _ghost_clear(self, deltas: Vec) -> bool:
+        """True when a G91 line of these deltas stays out of every keep-out however short of
+        its start an outside stop leaves the machine.
+
+        A hold or 0x85 from someone else leaves the lines not yet parsed in the controller's
+        buffer, and each then runs its increment from the stopping point (firmware-facts
+        §3.1, §3.7): anywhere on the path still ahead of the machine. The firmware checks its
+        own soft limits for every such line; keep-outs are smoothjog's alone, so the region
+        the line could sweep from there is checked here (the zones grown by half the inset).
+        """
+        track = self._track
+        x_mm = track.x_est_mm
+        grow = 0.5 * self._inset_mm()
+        for seg in track.path:
+            if seg.x0_mm + seg.length_mm <= x_mm:
+                continue
+            a = track.point_at(x_mm) if seg.x0_mm < x_mm else seg.start_mm
+            b = seg.end_mm
+            for zone in self.limits.keepouts:
+                lo = tuple(v - grow for v in zone.min_mm)
+                hi = tuple(v + grow for v in zone.max_mm)
+                # Most pieces are nowhere near a zone: their sweep's bounding box tells.
+                if any(
+                    min(ai, bi) + min(di, 0.0) >= h or max(ai, bi) + max(di, 0.0) <= lw
+                    for ai, bi, di, lw, h in zip(a, b, deltas, lo, hi, strict=False)
+                ):
+                    continue
+                if inc.sweep_enters_box(a, b, deltas, lo, hi):
+                    return False
+        return True
 
     def _room_along(self, start: Vec, ray: Vec) -> tuple[float, str]:
         """How far from start along ray the machine stays inside the inset envelope and clear of
@@ -1421,6 +1476,14 @@ class Jogger:
             return now_s - max(idle_s, since_s) > limit_s
         return now_s - since_s > 8.0 * limit_s
 
+    def _release_suspend(self, out: list[Output]) -> None:
+        """Before lines are given up as lost: a Grbl 1.1h that reports Idle yet answers no line
+        may be suspended by a 0x85 that reached it as a cancel ended (firmware-facts §3.8);
+        `~` releases it. In a plain Idle it does nothing (its planner is empty)."""
+        if self.limits.firmware == "grbl" and self.model.state == "Idle":
+            out.append(SendRealtime(CYCLE_START))
+            self.stats.suspend_releases += 1
+
     def _presume_lost(self, now_s: float, kinds: tuple[str, ...]) -> int:
         """Release the engine's unanswered lines of these kinds as answered; say so."""
         lost = [e for e in self._pending if _kind(e) in kinds]
@@ -1447,29 +1510,50 @@ class Jogger:
     def _advance_stop(self, now_s: float, out: list[Output]) -> None:
         if self._stop.phase is StopPhase.WAIT_ACKS:
             if self._jogs_unanswered():
-                if self._stop.cancelled and self._jog_reported:
-                    # An owed cancel (a door, hold or reset left lines unanswered): those lines
-                    # now run on their own. Cut each short as soon as a report shows it moving,
-                    # rather than let it run for the round trip its ok takes; the cancel after
-                    # the last ok still catches what starts later (firmware-facts §3.1).
-                    self._jog_reported = False
-                    out.append(SendRealtime(JOG_CANCEL))
-                    self.stats.cancels += 1
+                # Lines left by someone else's stop (or a door, hold or reset) start once it
+                # ends, each answered as Grbl parses it, all within a few milliseconds while
+                # its planner is empty. One 0x85 after the last of those oks throws them all
+                # away together; one sent as soon as the first shows up running would hold the
+                # others back in the RX buffer, to start one by one after it (firmware-facts
+                # §3.1, §3.7).
                 if not self._reply_overdue(now_s):
                     return  # a cancel now would let these lines run on (firmware-facts §3.1)
                 # Their replies were lost: the lines ran (or run); cancel whatever moves.
+                self._release_suspend(out)
                 self._presume_lost(now_s, ("jog",))
                 self._stop.owe_cancel()
-            cancel = bool(self._track.path) or self._stop.cancelled or self.model.state == "Jog"
+            if self._cancel_ending and self.model.state == "Jog":
+                # A cancel (someone else's, or one sent for a line that ran after it) has not
+                # been seen to end: the jog brakes or rests in Jog. A 0x85 reaching Grbl in
+                # that cancel's last moments would leave it suspended (firmware-facts §3.8),
+                # and the sync line waits behind the cancel anyway. A line that starts after
+                # it shows up running, and is cancelled then.
+                cancel = False
+            else:
+                cancel = bool(self._track.path) or self._stop.cancelled or self.model.state == "Jog"
             if cancel:
+                self._jog_unbraked = False
+                self._cancel_ending = True
                 out.append(SendRealtime(JOG_CANCEL))
                 self.stats.cancels += 1
             self._send(SYNC_LINE, "sync", now_s, out)
             self._stop.sync_sent(cancel_sent=cancel)
             self._stop_wait_s = now_s
+        elif (
+            self._stop.phase is StopPhase.WAIT_SYNC
+            and self._stop.owed
+            and self._jog_unbraked
+            and not firmware_facts(self.limits.firmware).jog_cancel.flushes_rx
+        ):
+            # The lines left behind an outside stop start as fresh jogs the moment it ends
+            # (firmware-facts §3.7); a 0x85 that reached the controller in the instant between
+            # (Idle) was dropped. Cancel each jog seen running until the sync line is answered.
+            # (Not where 0x85 empties the RX buffer: it would throw the sync away.)
+            self._send_owed_cancel(out)
         elif self._stop.phase is StopPhase.WAIT_SYNC and self._reply_overdue(now_s):
             # The sync line's reply was lost: sync again (Grbl answers each G4P0 once it has
             # run every line before it), a bounded number of times.
+            self._release_suspend(out)
             self._presume_lost(now_s, ("sync",))
             if self._stop.may_recancel():
                 self._stop.recancel()  # back to waiting for acks, then 0x85 and G4P0 again
@@ -1479,6 +1563,13 @@ class Jogger:
                 self._stop.sync_failed()
                 self._fresh_status_wanted = True
                 self._status_asked_s = None
+
+    def _send_owed_cancel(self, out: list[Output]) -> None:
+        """0x85 for a jog a report showed running; the next one needs a new such report."""
+        self._jog_unbraked = False
+        self._cancel_ending = True
+        out.append(SendRealtime(JOG_CANCEL))
+        self.stats.cancels += 1
 
     def _on_sync_reply(self, resp: Ok | ErrorReply, now_s: float) -> None:
         if self.phase is not Phase.STOPPING:
@@ -1493,7 +1584,9 @@ class Jogger:
             and self.model.state != "Alarm"
             and self._stop.may_recancel()
         ):
-            # firmware-facts §3.6: the sync line met a jog that restarted: cancel again.
+            # firmware-facts §3.6: the sync line met a jog that restarted: cancel again (it
+            # runs, so no cancel is ending).
+            self._cancel_ending = False
             self._stop.recancel()
             self.stats.recancels += 1
             self._stop_wait_s = now_s
@@ -1515,7 +1608,9 @@ class Jogger:
                 self._track.on_step_grid(mpos), cancelled=cancelled
             )
             self.stats.stops.append(
-                StopRecord(now_s, cancelled, recancels, err_mm, err_steps, tuple(mpos))
+                StopRecord(
+                    now_s, cancelled, recancels, err_mm, err_steps, tuple(mpos), self._stop.owed
+                )
             )
             self.events.append(EngineEvent(now_s, "stop", f"stopped at {_fmt(mpos)}"))
         self._track.reset()
@@ -1568,6 +1663,7 @@ class Jogger:
                 # the machine may have run short and slowed. That is no outside stop: judge
                 # only once a report shows it at speed again.
                 self._seen_at_speed = None
+                self._cruised = False
             self._rtts.append(latency_s)
             ranked = sorted(self._rtts)
             self._rtt_s = ranked[(3 * len(ranked)) // 4]
@@ -1613,7 +1709,23 @@ class Jogger:
         self._status_asked_s = None
         self._last_report_bytes = len(report.raw) + 2
         self._last_report_s = now_s
-        self._jog_reported = report.state == "Jog"
+        # Running, not braking: a cancel (anyone's) only ever slows the jog down, so a speed
+        # no lower than the last report's is a jog that is not being cancelled. Without an
+        # FS field every Jog report counts.
+        # A report of Jog right after one of another state is a jog just started, at any
+        # speed; at rest in Jog after a Jog report is a stop ending.
+        feed = report.feed
+        if report.state != "Jog":
+            self._jog_unbraked = False
+            self._prev_feed_mm_min = None
+        elif feed is None or self._prev_feed_mm_min is None:
+            self._jog_unbraked = True
+            self._prev_feed_mm_min = feed
+        else:
+            self._jog_unbraked = feed > 0.0 and feed >= self._prev_feed_mm_min
+            self._prev_feed_mm_min = feed
+        if report.state != "Jog" or self._jog_unbraked:
+            self._cancel_ending = False
         if report.state != "Idle":
             self._idle_since_s = None
         elif self._idle_since_s is None:
@@ -1634,14 +1746,14 @@ class Jogger:
             predicted_mm = self._track.x_est_mm
             off_path = self._track.correct_estimate(mpos, (len(report.raw) + 2) * self._byte_s)
             lead_mm = self._track.x_est_mm - predicted_mm
-            if not off_path and self._lags_outside(report, predicted_mm, asked_s, now_s):
-                # Behind the estimate by more than the report's age explains: the machine is
-                # braking or resting although the queue runs (an outside feed hold or 0x85;
-                # Grbl shows Jog throughout that stop, and may never show Idle before the lines
-                # still in its buffer start it again, firmware-facts §3.1-§3.2).
-                self._outside_stop(
-                    now_s, report, f"it fell {-lead_mm:.2f} mm behind the path it was sent"
-                )
+            how = None if off_path else self._lags_outside(report, predicted_mm, asked_s, now_s)
+            if how is not None:
+                # Behind the estimate by more than the report's age explains, or at rest with
+                # path queued ahead: the machine is braking or resting although the queue runs
+                # (an outside feed hold or 0x85; Grbl shows Jog throughout that stop, and may
+                # never show Idle before the lines still in its buffer start it again,
+                # firmware-facts §3.1-§3.2).
+                self._outside_stop(now_s, report, how)
                 return lead_mm
             if off_path and self.phase is Phase.JOGGING:
                 # The machine is off every jog we sent: something moved or stopped it outside
@@ -1728,7 +1840,7 @@ class Jogger:
 
     def _lags_outside(
         self, report: StatusReport, predicted_mm: float, asked_s: float | None, now_s: float
-    ) -> bool:
+    ) -> str | None:
         """True when a report shows a jog that ran at speed now braking or at rest for no
         reason of smoothjog's: an outside feed hold or 0x85 (Grbl reports Jog throughout that
         stop and may never report Idle before the lines in its buffer start it again,
@@ -1742,39 +1854,50 @@ class Jogger:
         move = self._commanded
         if report.state != "Jog" or self.phase is not Phase.JOGGING:
             self._seen_at_speed = None
-            return False
+            self._cruised = False
+            return None
         feed = report.feed
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
+        step_mm = 1.0 / min(self.limits.steps_per_mm)
+        planned = [seg for seg in self._track.path if seg.acked]
+        if feed is not None and feed >= 0.95 * cmd_mm_min:
+            self._cruised = True
+        elif feed == 0.0 and self._cruised and asked_s is not None and planned:
+            # At rest in Jog with acknowledged path ahead, after this run was seen at speed:
+            # a turn never slows the planner to 0 (the engine stops for a reversal), and a
+            # queue that ran dry rests at its end, so wherever the estimate stands (by a
+            # junction, on a slide) only someone else's stop rests here.
+            rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
+            if rest_ahead_mm > max(OUTSIDE_LAG_MM, 3.0 * step_mm):
+                return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
                 self._seen_at_speed = move
-            return False
+            return None
         if (feed is not None and feed >= 0.9 * cmd_mm_min) or asked_s is None:
-            return False
+            return None
         seg = self._track.seg_at(self._track.x_est_mm)
         if seg is None or seg.unit_vec is None or self._near_a_slow_junction(move):
             # Only a cruise is judged (the same unclipped increment repeated): at a turn, a
             # slide along an edge or a speed change the machine slows and the estimate follows
             # it less closely. Judge again once it is back at speed.
             self._seen_at_speed = None
-            return False
-        planned = [seg for seg in self._track.path if seg.acked]
+            return None
         if not planned:
-            return False
+            return None
         # The planner holds at least the acknowledged jogs; a machine braking for their end
         # (lines late on a stalled link) has no more ahead of it than it needs to stop from
         # the speed it reports. One braking with more ahead was stopped by someone else.
         speed_mm_s = mm_min_to_mm_s(feed) if feed is not None else self._track.v_est_mm_s
         age_s = max(now_s - asked_s, 0.0)
         ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-        step_mm = 1.0 / min(self.limits.steps_per_mm)
         needed_mm = (
             inc.stop_distance_mm(speed_mm_s, move.accel_mm_s2)
             + speed_mm_s * age_s
             + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
         )
         if ahead_mm <= needed_mm:
-            return False
+            return None
         lag_mm = predicted_mm - self._track.x_est_mm
         # A report built any time since its `?` may be this much older than now.
         allowed_mm = max(self._track.v_est_mm_s, move.speed_mm_s) * max(now_s - asked_s, 0.0)
@@ -1791,7 +1914,9 @@ class Jogger:
                 2.0 * step_mm,
                 min(move.speed_mm_s * OUTSIDE_LAG_S, OUTSIDE_LAG_CAP_MM),
             )
-        return lag_mm > allowed_mm + margin_mm
+        if lag_mm > allowed_mm + margin_mm:
+            return f"it fell {lag_mm:.2f} mm behind the path it was sent"
+        return None
 
     def _near_a_slow_junction(self, move: inc.VectorMove) -> bool:
         """True while the estimate is within a speed-up's reach past a junction the planner
@@ -1829,7 +1954,11 @@ class Jogger:
         self._intent = None
         self._acted_intent = None
         self._await_press = True
+        self._cancel_ending = report.state == "Jog" and not self._jog_unbraked
         self._begin_stop(now_s)
+        # The lines it had not yet run start again the moment that stop ends (firmware-facts
+        # §3.1, §3.7): cut each one short as soon as a report shows it.
+        self._stop.owe_cancel()
 
     def _note_pins(self, report: StatusReport, now_s: float) -> None:
         """Remember the inputs that read active at rest, and warn once about hold and door."""
@@ -1868,8 +1997,8 @@ class Jogger:
         interval_s = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
         if self._cancel_owed or (
             self.phase is Phase.STOPPING
-            and self._stop.phase is StopPhase.WAIT_ACKS
-            and self._stop.cancelled
+            and self._stop.phase in (StopPhase.WAIT_ACKS, StopPhase.WAIT_SYNC)
+            and self._stop.owed
         ):
             # Lines left by a door, hold or reset may start the machine any moment (someone
             # else resumes it): look often, so the owed cancel comes within a block or two.
@@ -1879,11 +2008,15 @@ class Jogger:
         report = self._last_report_bytes * self._byte_s / REPORT_SHARE
         return max(interval_s, report)
 
+    def _status_due_s(self) -> float:
+        """When the next routine status query is due."""
+        return self._last_status_sent_s + self._poll_interval_s()
+
     def _poll_status(self, now_s: float, out: list[Output]) -> None:
         asked = self._status_asked_s
         if asked is not None and now_s - asked < self.tuning.status_timeout_s:
             return  # one `?` at a time: Grbl folds a second one into the first anyway (§5.2)
-        if self._status_urgent() or now_s - self._last_status_sent_s >= self._poll_interval_s():
+        if self._status_urgent() or now_s >= self._status_due_s():
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s
             self._last_status_sent_s = now_s

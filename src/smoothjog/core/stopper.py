@@ -32,16 +32,21 @@ class StopHandshake:
     phase: StopPhase = StopPhase.IDLE
     cancelled: bool = False
     recancels: int = 0
+    #: The stop was not smoothjog's idea (an outside stop, a door, hold or reset): lines may
+    #: restart the machine on their own, so every report of a jog moving is cancelled.
+    owed: bool = False
 
     def begin(self) -> None:
         """A new stop: wait for the jog lines' oks."""
         self.phase = StopPhase.WAIT_ACKS
         self.cancelled = False
         self.recancels = 0
+        self.owed = False
 
     def owe_cancel(self) -> None:
         """Send 0x85 even with no path: lines left in the controller must not run."""
         self.cancelled = True
+        self.owed = True
 
     def sync_sent(self, *, cancel_sent: bool) -> None:
         """Every jog was answered; the sync line (after 0x85 if cancel_sent) is on its way."""

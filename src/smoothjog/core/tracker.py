@@ -166,7 +166,11 @@ class PathTracker:
         arrives (a stalled link delivers reports late), so that much path behind the estimate
         is kept, at least PATH_KEEP_MM.
         """
-        recent_from = self.x_est_mm - (1.0 + self.v_est_mm_s * report_age_s)
+        # At the speed jogged, not the estimate's: an estimate braking at the end of what was
+        # acknowledged (replies held up by the same stall) says nothing of how far back a
+        # late report can be.
+        speed_mm_s = max(self.v_est_mm_s, self.path[-1].speed_mm_s) if self.path else 0.0
+        recent_from = self.x_est_mm - (1.0 + speed_mm_s * report_age_s)
         keep_from = min(self.x_est_mm - PATH_KEEP_MM, recent_from)
         drop = 0
         while drop < len(self.path) - 1 and (
