@@ -1866,9 +1866,13 @@ class Jogger:
             # At rest in Jog with acknowledged path ahead, after this run was seen at speed:
             # a turn never slows the planner to 0 (the engine stops for a reversal), and a
             # queue that ran dry rests at its end, so wherever the estimate stands (by a
-            # junction, on a slide) only someone else's stop rests here.
+            # junction, on a slide) only someone else's stop rests here. FS is the speed of
+            # the segments being prepared, which reaches 0 while the committed ones still
+            # run: a queue braking for its end (an edge, a keep-out) may still be that far
+            # from it, ½·a·t² over the committed time.
             rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-            if rest_ahead_mm > max(OUTSIDE_LAG_MM, 3.0 * step_mm):
+            committed_mm = 0.5 * move.accel_mm_s2 * self.tuning.committed_s**2
+            if rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm):
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
