@@ -874,6 +874,9 @@ class Jogger:
         self.phase = Phase.JOGGING
         self._track.begin(self._track.on_step_grid(mpos), now_s)
         self._track.moving_since_ack = False  # the estimate waits for the first jog's ok
+        # A new run is judged once a report shows it at speed, whatever reports came between.
+        self._cruised = False
+        self._seen_at_speed = None
 
     def _ahead_s(self, block_s: float) -> float:
         """Queue time beyond the stopping distance: committed segments, round trip, one tick.
@@ -1457,6 +1460,7 @@ class Jogger:
         if self.phase is Phase.STOPPING:
             return
         self.phase = Phase.STOPPING
+        self._cruised = False
         self._stop.begin()
         self._stop_wait_s = now_s
 
@@ -1871,8 +1875,12 @@ class Jogger:
             # run: a queue braking for its end (an edge, a keep-out) may still be that far
             # from it, ½·a·t² over the committed time.
             rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-            committed_mm = 0.5 * move.accel_mm_s2 * self.tuning.committed_s**2
-            if rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm):
+            # (Half as long again as the committed time: the segment buffer's lead varies.)
+            committed_mm = 0.5 * move.accel_mm_s2 * (1.5 * self.tuning.committed_s) ** 2
+            if (
+                rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
+                and not self._near_a_junction_at_rest()
+            ):
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
@@ -1921,6 +1929,18 @@ class Jogger:
         if lag_mm > allowed_mm + margin_mm:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
+
+    def _near_a_junction_at_rest(self) -> bool:
+        """True while the estimate is within braking reach of a junction the planner passes at
+        (nearly) no speed: a reversal the engine let the queue run through rests there."""
+        x = self._track.x_est_mm
+        for seg in self._track.path:
+            if seg.entry_cap_mm_s >= 0.1 * seg.speed_mm_s:
+                continue
+            reach_mm = seg.speed_mm_s**2 / seg.accel_mm_s2 + OUTSIDE_LAG_MM
+            if seg.x0_mm - reach_mm <= x <= seg.x0_mm + reach_mm:
+                return True
+        return False
 
     def _near_a_slow_junction(self, move: inc.VectorMove) -> bool:
         """True while the estimate is within a speed-up's reach past a junction the planner
