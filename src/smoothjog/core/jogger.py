@@ -1875,8 +1875,13 @@ class Jogger:
             # run: a queue braking for its end (an edge, a keep-out) may still be that far
             # from it, ½·a·t² over the committed time.
             rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-            # (Half as long again as the committed time: the segment buffer's lead varies.)
-            committed_mm = 0.5 * move.accel_mm_s2 * (1.5 * self.tuning.committed_s) ** 2
+            # (Half as long again as the committed time: the segment buffer's lead varies;
+            # and never more than the whole stop from the speed jogged, short at a slow jog.)
+            v_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
+            committed_mm = min(
+                0.5 * move.accel_mm_s2 * (1.5 * self.tuning.committed_s) ** 2,
+                inc.stop_distance_mm(v_mm_s, move.accel_mm_s2),
+            )
             if (
                 rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
                 and not self._near_a_junction_at_rest()
