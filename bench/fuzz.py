@@ -450,7 +450,8 @@ def _fault_sequence(
             report.restarts_after_outside_stop += 1
             moved = measure.distance_after(again, again[0].t0_s)
             report.worst_restart_mm = max(report.worst_restart_mm, moved)
-            was = "moving" if rest > t else "at rest"
+            speed = _speed_at(trace, t, start_checked)
+            was = f"moving at {speed:.1f} mm/s" if rest > t else "at rest"
             report.faults.append(
                 f"restart: {kind} at {t:.3f} s (machine {was}), at rest at {rest:.3f} s, moving "
                 f"again at {again[0].t0_s:.3f} s ({moved:.2f} mm) with no new press"
@@ -466,6 +467,11 @@ def _own_cancel_sent(engine: Jogger) -> bool:
     """True while the engine's own stop has sent its 0x85 and waits for the sync line."""
     stop = engine._stop
     return engine.phase is Phase.STOPPING and stop.phase is StopPhase.WAIT_SYNC and stop.cancelled
+
+
+def _speed_at(trace: list[TraceSegment], t_s: float, start: int) -> float:
+    """The machine's speed at t_s (mm/s)."""
+    return max((s.speed_mm_s for s in trace[start:] if s.t0_s <= t_s < s.t1_s), default=0.0)
 
 
 def _moving_at(trace: list[TraceSegment], t_s: float, start: int) -> bool:

@@ -174,3 +174,26 @@ def test_a_hold_input_pressed_mid_jog_names_the_input() -> None:
     assert h2.fault_texts() == [
         "the controller's door input was pressed: the controller is stopping"
     ]
+
+
+def test_an_outside_stop_on_a_slide_along_a_keep_out_is_seen() -> None:
+    # Along a zone's face the jog runs at the speed of the axis left (Y's 5000 mm/min here),
+    # never at the diagonal's 7071: the speed it was seen at is that of the jog it is on.
+    from smoothjog.core.machine import KeepOut
+
+    h = EngineHarness(keepouts=(KeepOut("vise", (-100.0, -200.0, -100.0), (-20.0, -10.0, 0.0)),))
+    h.rest_at(START_MPOS)
+    h.intent(ContinuousIntent({"X": -1.0, "Y": -1.0}, 1.0))
+    h.run(1.2)
+    track = h.engine._track
+    here = track.seg_at(track.x_est_mm)
+    assert here is not None and here.speed_mm_s < 0.8 * h.engine._commanded.speed_mm_s  # slide
+    # The path tracks the slide at the speed its lines ask for (Y alone at its $111).
+    assert abs(here.speed_mm_s - V_MM_S) < 1e-6
+    h.status("Jog", _estimate_mm(h), fs=(here.speed_mm_s * 60, 0))
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+    h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
+    assert _outside_faults(h), h.fault_texts()
+    assert "stood still" in _outside_faults(h)[0]

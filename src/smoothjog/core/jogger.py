@@ -1013,11 +1013,12 @@ class Jogger:
             # worked out when this run began (every start of the run lies on that ray).
             line, deltas, seg_len = cruise.line, cruise.deltas_mm, cruise.seg_len_mm
             run_mm = cruise.run_mm + seg_len
+            seg_move = move
         else:
             made = self._make_increment(start, move, length_mm)
             if made is None:
                 return False
-            line, deltas, seg_len, cruise = made
+            line, deltas, seg_len, cruise, seg_move = made
             run_mm = seg_len
         end = tuple(s + d for s, d in zip(start, deltas, strict=True))
         if not self._fits_envelope(end):
@@ -1041,8 +1042,9 @@ class Jogger:
             # The length between the float positions the path keeps (not the exact increment),
             # so the path's own arithmetic stays what it was before repeats were cached.
             norm(tuple(e - s for e, s in zip(end, start, strict=True))),
-            move.speed_mm_s,
-            move.accel_mm_s2,
+            # The speed and acceleration of the line as written (a slide has the axes left).
+            seg_move.speed_mm_s,
+            seg_move.accel_mm_s2,
             self._track.length_mm(),
             unit_vec=cruise.unit_vec if cruise is not None else None,
         )
@@ -1052,7 +1054,7 @@ class Jogger:
 
     def _make_increment(
         self, start: Vec, move: inc.VectorMove, length_mm: float
-    ) -> tuple[str, Vec, float, _Cruise | None] | None:
+    ) -> tuple[str, Vec, float, _Cruise | None, inc.VectorMove] | None:
         """Clip, round and write one increment; the cruise to repeat it, when it may be."""
         clipped = self._clip(start, move, length_mm)
         if clipped is None:
@@ -1088,7 +1090,8 @@ class Jogger:
         delta_vec = tuple(deltas.get(axis, 0.0) for axis in self.limits.axes)
         seg_len = norm(delta_vec)
         if clipped_move is not move or clipped_mm != length_mm or seg_len <= 0.0:
-            return line, delta_vec, seg_len, None  # near an edge: worked out afresh each time
+            # Near an edge: worked out afresh each time; a slide runs at its own speed.
+            return line, delta_vec, seg_len, None, clipped_move
         # The rounded increment's own direction: start + k * delta stays exactly on this ray,
         # so its clear distance holds for every repeat (the unrounded direction would drift).
         ray = tuple(d / seg_len for d in delta_vec)
@@ -1104,7 +1107,7 @@ class Jogger:
             run_mm=0.0,
             next_start_mm=start,
         )
-        return line, delta_vec, seg_len, cruise
+        return line, delta_vec, seg_len, cruise, move
 
     def _ghost_clear(self, deltas: Vec) -> bool:
         """True when a G91 line of these deltas stays out of every keep-out however short of
@@ -1864,7 +1867,11 @@ class Jogger:
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
         step_mm = 1.0 / min(self.limits.steps_per_mm)
         planned = [seg for seg in self._track.path if seg.acked]
-        if feed is not None and feed >= 0.95 * cmd_mm_min:
+        # At speed: the commanded one, or that of the jog it is on (a slide along a keep-out or
+        # the envelope runs slower than the stick asks).
+        here = self._track.seg_at(self._track.x_est_mm)
+        seg_mm_min = mm_s_to_mm_min(here.speed_mm_s) if here is not None else cmd_mm_min
+        if feed is not None and feed >= 0.95 * min(cmd_mm_min, seg_mm_min):
             self._cruised = True
         elif feed == 0.0 and self._cruised and asked_s is not None and planned:
             # At rest in Jog with acknowledged path ahead, after this run was seen at speed:
