@@ -187,7 +187,8 @@ def test_an_outside_stop_on_a_slide_along_a_keep_out_is_seen() -> None:
     h.run(1.2)
     track = h.engine._track
     here = track.seg_at(track.x_est_mm)
-    assert here is not None and here.speed_mm_s < 0.8 * h.engine._commanded.speed_mm_s  # slide
+    assert here is not None
+    assert here.speed_mm_s < 0.8 * h.engine._commanded.speed_mm_s  # on the slide
     # The path tracks the slide at the speed its lines ask for (Y alone at its $111).
     assert abs(here.speed_mm_s - V_MM_S) < 1e-6
     h.status("Jog", _estimate_mm(h), fs=(here.speed_mm_s * 60, 0))
