@@ -1266,6 +1266,27 @@ def test_the_cancel_owed_at_a_reset_survives_the_re_handshake() -> None:
     assert kinds(h.poll()) == ["0x85", "G4P0"]
 
 
+def test_a_press_made_while_the_settings_are_re_read_after_a_reset_jogs() -> None:
+    """The banner abandons the jog; a press after it (the re-handshake is still reading `$$`)
+    is a new one, and must not be lost when the host hands the engine the new limits."""
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(ContinuousIntent({"X": -1.0}))
+    h.poll()
+    h.feed(BANNER)
+    h.ledger.reset()
+    h.intent(ContinuousIntent({"X": -1.0}, 0.2))  # pressed during the re-handshake
+    h.engine.reset_machine(dataclasses.replace(h.engine.limits))
+    h.status("Idle", START_MPOS)
+    # The jog lines sent before the reset may still start it: their cancel and sync come first.
+    assert kinds(h.poll()) == ["0x85", "G4P0"]
+    h.ok()
+    h.status("Idle", START_MPOS)
+    h.poll()
+    h.status("Idle", START_MPOS)
+    assert "$J" in kinds(h.poll())
+
+
 def _feeds(h: EngineHarness) -> set[str]:
     return {line.rsplit("F", 1)[1] for line in h.jog_lines()}
 

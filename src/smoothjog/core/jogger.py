@@ -733,13 +733,18 @@ class Jogger:
         """Start over after a re-handshake (the controller was reset).
 
         A cancel owed for jog lines sent before the reset was seen stays owed: they may still
-        start the machine (it is sent once a report shows Jog).
+        start the machine (it is sent once a report shows Jog). A press made after the banner
+        (while the settings were re-read, a second at 9600 baud) is a new press: it is kept,
+        and runs once the machine may jog.
         """
         owed = self._cancel_owed
+        intent, steps = self._intent, list(self._steps)
         self.limits = limits
         self._forget_pending()
         self._abandon_motion()
         self._cancel_owed = owed or self._cancel_owed
+        self._intent = intent
+        self._steps.extend(step for step in steps if not isinstance(step, _WheelRun))
 
     # ----------------------------------------------------------------- the driver's tick
     def poll(self, now_s: float) -> list[Output]:
