@@ -198,3 +198,25 @@ def test_an_outside_stop_on_a_slide_along_a_keep_out_is_seen() -> None:
     h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
     assert _outside_faults(h), h.fault_texts()
     assert "stood still" in _outside_faults(h)[0]
+
+
+def test_an_outside_stop_while_the_engine_waits_to_cancel_its_own_is_seen() -> None:
+    # Let go (or turned) and the engine waits for the last oks before its 0x85: the queue
+    # still runs as sent, so a rest far short of it is someone else's stop. It is said, and its
+    # cancel is owed for the lines it left.
+    h = _cruising()
+    while not h.unanswered():
+        h.advance(0.002)
+        h.poll()
+    h.intent(StopIntent())
+    h.poll()
+    assert h.engine.phase is Phase.STOPPING
+    assert not h.engine._stop.cancelled
+    h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
+    while h.engine._status_asked_s is None:  # on to the next `?`
+        h.advance(0.002)
+        h.poll()
+    h.advance(0.003)
+    h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
+    assert _outside_faults(h), h.fault_texts()
+    assert h.engine._stop.owed

@@ -1468,7 +1468,6 @@ class Jogger:
         if self.phase is Phase.STOPPING:
             return
         self.phase = Phase.STOPPING
-        self._cruised = False
         self._stop.begin()
         self._stop_wait_s = now_s
 
@@ -1864,7 +1863,14 @@ class Jogger:
         what the report's age can explain (it may have been built any time since its `?`).
         """
         move = self._commanded
-        if report.state != "Jog" or self.phase is not Phase.JOGGING:
+        # While smoothjog's own stop waits for the oks before its 0x85, the queue still runs as
+        # sent: someone else's stop then shows just as it does while jogging.
+        own_stop_uncancelled = (
+            self.phase is Phase.STOPPING
+            and self._stop.phase is StopPhase.WAIT_ACKS
+            and not self._stop.cancelled
+        )
+        if report.state != "Jog" or not (self.phase is Phase.JOGGING or own_stop_uncancelled):
             self._seen_at_speed = None
             self._cruised = False
             return None
