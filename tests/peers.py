@@ -99,8 +99,8 @@ class ScriptedGrbl:
 
     def _line(self, line: str) -> bytes:
         """The reply to one complete line."""
-        if self.silent:
-            return b""
+        if self.silent or self.state.startswith(("Hold", "Door", "Sleep")):
+            return b""  # Grbl's main loop reads no line while suspended (firmware-facts §3.2)
         if self.foreign_reply is not None:
             return self.foreign_reply
         command = line.strip().upper()

@@ -146,6 +146,16 @@ async def test_silent_serial_peer_times_out_with_baud_hint() -> None:
     )
 
 
+async def test_a_controller_held_in_feed_hold_is_named_not_called_silent() -> None:
+    """Someone's `!` left it in Hold:0: it answers `?` but no line; say so, not "is it Grbl"."""
+    with TcpPeer(ScriptedGrbl(state="Hold:0")) as peer:
+        async with TcpLink(peer.host, peer.port) as link:
+            with pytest.raises(ConnectError) as info:
+                await handshake(link, timeout_s=0.3)
+    assert "reports Hold:0 and reads no line in that state" in str(info.value)
+    assert "resume it (cycle start, ~)" in str(info.value)
+
+
 async def test_silent_tcp_peer_times_out_without_baud_hint() -> None:
     """No answer over TCP: the message does not talk about baud rates."""
     with TcpPeer(ScriptedGrbl(silent=True)) as peer:

@@ -43,6 +43,10 @@ DEFAULT_TIMEOUT_S = 5.0
 FOREIGN_LINES_LIMIT = 20
 #: How long to collect lines that were already waiting before the first query.
 SETTLE_S = 0.1
+#: How long a `?` may take when a query went unanswered and the state may say why (s).
+STATUS_CHECK_S = 1.0
+#: States in which Grbl answers `?` but parses no line until resumed (or reset).
+SUSPENDED_STATES = frozenset({"Hold", "Door", "Sleep"})
 #: Banners survived during one handshake (see handshake()).
 MAX_RESETS = 2
 #: A status report is not made in some states (homing, after a limit alarm: firmware-facts §5.2).
@@ -163,7 +167,7 @@ class Querier:
                 if stale_ok:
                     # Only bare oks came: a firmware that answers this query with nothing.
                     return QueryResult(line, Ok(), responses)
-                raise self._no_answer(line)
+                raise await self._no_answer_why(line)
             if isinstance(response, Banner):
                 raise ControllerResetError(response, self.link.describe())
             if isinstance(response, ErrorReply):
@@ -204,6 +208,22 @@ class Querier:
             self.heard_grbl = True
             self._foreign_run = 0
         return response
+
+    async def _no_answer_why(self, line: str) -> ConnectError:
+        """The error for a query that got no reply: a status report may say why."""
+        try:
+            status = await asyncio.wait_for(self.ask_status(), min(STATUS_CHECK_S, self.timeout_s))
+        except (TimeoutError, ControllerResetError):
+            status = None
+        if status is not None and status.state in SUSPENDED_STATES:
+            # A feed hold (someone's `!` or a hold button), an open door or sleep: Grbl's main
+            # loop reads no line until it is resumed (firmware-facts §3.2, §3.3).
+            shown = status.state if status.substate is None else f"{status.state}:{status.substate}"
+            return ConnectError(
+                f"{self.link.describe()} reports {shown} and reads no line in that state:"
+                " resume it (cycle start, ~) or reset it, then connect again"
+            )
+        return self._no_answer(line)
 
     def _no_answer(self, line: str) -> ConnectError:
         """The error for a query that got no reply in time."""
