@@ -220,3 +220,12 @@ def test_an_outside_stop_while_the_engine_waits_to_cancel_its_own_is_seen() -> N
     h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
     assert _outside_faults(h), h.fault_texts()
     assert h.engine._stop.owed
+    # The stick was already let go: the next press is a press, not a held stick to ignore.
+    h.ok_all()
+    h.poll()
+    h.ok()
+    h.status("Idle", _estimate_mm(h, behind_mm=3.0))
+    h.poll()
+    h.intent(ContinuousIntent({"X": 1.0}, 1.0))
+    h.status("Idle", _estimate_mm(h, behind_mm=3.0))
+    assert "$J" in kinds(h.poll())

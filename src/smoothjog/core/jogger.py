@@ -1998,9 +1998,11 @@ class Jogger:
             f"the jog was stopped outside smoothjog: {how}; stopped by {who}",
             "release the stick (or key) and press it again to jog on",
         )
+        # A stick still held must be pressed anew; one already let go (the stop under way is
+        # the release's) has nothing to latch, and the next press simply jogs.
+        self._await_press = self._intent is not None
         self._intent = None
         self._acted_intent = None
-        self._await_press = True
         self._cancel_ending = report.state == "Jog" and not self._jog_unbraked
         self._begin_stop(now_s)
         # The lines it had not yet run start again the moment that stop ends (firmware-facts
