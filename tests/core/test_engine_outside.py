@@ -229,3 +229,32 @@ def test_an_outside_stop_while_the_engine_waits_to_cancel_its_own_is_seen() -> N
     h.intent(ContinuousIntent({"X": 1.0}, 1.0))
     h.status("Idle", _estimate_mm(h, behind_mm=3.0))
     assert "$J" in kinds(h.poll())
+
+
+def test_a_stop_far_off_the_path_sent_is_said_and_not_judged_as_tracking() -> None:
+    # An outside stop not seen while it happened: the lines it left ran from where it left the
+    # machine, and the final rest lies off every jog sent. The engine says so at the stop.
+    h = _cruising()
+    h.intent(StopIntent())
+    h.ok_all()
+    h.poll()
+    h.ok()  # the sync
+    off = _estimate_mm(h)
+    h.status("Idle", (off[0], off[1] + 2.0, off[2]))  # 2 mm beside the path
+    h.poll()
+    assert h.engine.phase is Phase.IDLE
+    assert any("off the path smoothjog sent" in t for t in h.fault_texts()), h.fault_texts()
+    assert h.engine.stats.stops[-1].after_outside_stop
+
+
+def test_a_stop_on_the_path_raises_nothing() -> None:
+    h = _cruising()
+    h.intent(StopIntent())
+    h.ok_all()
+    h.poll()
+    h.ok()
+    h.status("Idle", _estimate_mm(h))
+    h.poll()
+    assert h.engine.phase is Phase.IDLE
+    assert h.fault_texts() == []
+    assert not h.engine.stats.stops[-1].after_outside_stop

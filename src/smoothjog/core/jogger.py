@@ -98,6 +98,9 @@ OUTSIDE_LAG_S = 0.03
 OUTSIDE_LAG_CAP_MM = 1.0
 #: Queue kept beyond the stopping distance and the committed segments however slow the jog.
 QUEUE_FLOOR_MM = 0.3
+#: A stop this many steps (of the worst axis) off the path sent was not smoothjog's doing: the
+#: fuzz's worst tracked-minus-real without outside events is under one step.
+OFF_PATH_STOP_STEPS = 5.0
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
 #: Jog-line latencies the round-trip estimate looks at.
@@ -1618,10 +1621,24 @@ class Jogger:
             err_mm, err_steps = self._track.tracking_error(
                 self._track.on_step_grid(mpos), cancelled=cancelled
             )
-            self.stats.stops.append(
-                StopRecord(
-                    now_s, cancelled, recancels, err_mm, err_steps, tuple(mpos), self._stop.owed
+            outside = self._stop.owed
+            # (A fault already raised in this run, a rejected line or a Run-state race, has
+            # said why the path no longer holds.)
+            if err_steps > OFF_PATH_STOP_STEPS and not outside and self._fault is None:
+                # Every line smoothjog sent stops on its path, to a step: a rest this far off
+                # it is motion that was not smoothjog's (a stop from outside seen only now,
+                # whose left-over lines ran from where it left the machine, firmware-facts
+                # §3.1). The position is re-read from the report, so nothing builds on it.
+                outside = True
+                self._fault_now(
+                    now_s,
+                    f"the machine stopped {err_mm:.2f} mm off the path smoothjog sent: something"
+                    " outside smoothjog stopped or moved it",
+                    "check for another program, a button or a pendant on the controller;"
+                    " smoothjog has re-read the position",
                 )
+            self.stats.stops.append(
+                StopRecord(now_s, cancelled, recancels, err_mm, err_steps, tuple(mpos), outside)
             )
             self.events.append(EngineEvent(now_s, "stop", f"stopped at {_fmt(mpos)}"))
         self._track.reset()
