@@ -319,7 +319,8 @@ def _finish(report: FuzzReport, events: list[EngineEvent], faults: Faults) -> Fu
     report.faults_reported = len(fault_texts)
     if not faults.active:
         report.false_outside_alarms = sum(
-            "stopped outside smoothjog" in f or "left the path" in f for f in fault_texts
+            "stopped outside smoothjog" in f or "left the path" in f or "off the path" in f
+            for f in fault_texts
         )
     report.faults += fault_texts[:5]
     return report
