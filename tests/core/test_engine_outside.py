@@ -258,3 +258,29 @@ def test_a_stop_on_the_path_raises_nothing() -> None:
     assert h.engine.phase is Phase.IDLE
     assert h.fault_texts() == []
     assert not h.engine.stats.stops[-1].after_outside_stop
+
+
+def test_a_turn_near_a_keep_out_waits_for_a_report_of_the_machine_at_the_corner() -> None:
+    # Along the zone's face toward its corner, then a line past the corner and back across the
+    # zone's extent: sent while the machine may still be short of the corner, an outside stop
+    # would leave it running from there, into the zone (firmware-facts §3.1).
+    from smoothjog.core.machine import KeepOut
+    from smoothjog.core.tracker import PathSeg
+
+    zone = KeepOut("vise", (-100.0, -30.0, -100.0), (-20.0, -10.0, 0.0))
+    h = EngineHarness(keepouts=(zone,))
+    h.rest_at((-19.9, -25.0, -1.0))
+    h.intent(ContinuousIntent({"Y": 1.0}, 0.1))
+    h.poll()
+    track = h.engine._track
+    track.path.clear()
+    track.end_mm = (-19.9, -25.0, -1.0)
+    track.append(PathSeg((-19.9, -25.0, -1.0), (-19.9, -9.9, -1.0), 15.1, 8.3, 500.0, 0.0))
+    across = (-1.0, 0.0, 0.0)  # from the corner, X- along the zone's edge (outside it)
+    track.x_est_mm = 15.0  # the estimate: almost at the corner ...
+    track.x_reported_mm = 14.0  # ... the last report: a millimetre short of it (Y -11)
+    assert not h.engine._ghost_clear(across)
+    track.x_est_mm = track.x_reported_mm = 15.1  # reported at the corner: the line may go
+    assert h.engine._ghost_clear(across)
+    track.x_reported_mm = None  # no report of this path yet: from its start
+    assert not h.engine._ghost_clear(across)

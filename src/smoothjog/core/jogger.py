@@ -1128,7 +1128,11 @@ class Jogger:
         the line could sweep from there is checked here (the zones grown by half the inset).
         """
         track = self._track
-        x_mm = track.x_est_mm
+        # From where the machine may really be: the estimate runs ahead of it while it brakes
+        # for a corner, so the last report's place counts when it is further back (until a
+        # report shows the machine there, a turn at a zone's corner waits).
+        reported = track.x_reported_mm
+        x_mm = min(track.x_est_mm, reported if reported is not None else 0.0)
         grow = 0.5 * self._inset_mm()
         for seg in track.path:
             if seg.x0_mm + seg.length_mm <= x_mm:

@@ -56,6 +56,9 @@ class PathTracker:
         self.path: list[PathSeg] = []
         self.end_mm: Vec | None = None  # end of the last jog sent (machine mm)
         self.x_est_mm = 0.0  # estimated machine progress along the path
+        #: Where the last status report placed the machine along the path (before moving it
+        #: on by the report's age); None until a report of this path came.
+        self.x_reported_mm: float | None = None
         self.v_est_mm_s = 0.0
         self.est_s = 0.0  # when the estimate was last advanced
         self.moving_since_ack = False  # the estimate runs only once a jog has its ok
@@ -74,6 +77,7 @@ class PathTracker:
         self.path.clear()
         self.end_mm = start_mm
         self.x_est_mm = 0.0
+        self.x_reported_mm = None
         self.v_est_mm_s = 0.0
         self.est_s = now_s
 
@@ -86,6 +90,7 @@ class PathTracker:
         """Forget the path and the estimate (a stop is complete)."""
         self.drop()
         self.x_est_mm = 0.0
+        self.x_reported_mm = None
         self.v_est_mm_s = 0.0
 
     def append(self, seg: PathSeg) -> None:
@@ -329,12 +334,14 @@ class PathTracker:
             return True
         # The report was built before its bytes crossed the wire: move it forward by that age.
         ahead = self.v_est_mm_s * age_s
+        self.x_reported_mm = best
         self.x_est_mm = min(best + ahead, self.length_mm())
         return False
 
     def arrive_at_end(self) -> None:
         """The machine is known to rest at the end of the path."""
         self.x_est_mm = self.length_mm()
+        self.x_reported_mm = self.x_est_mm
         self.v_est_mm_s = 0.0
 
     def at_rest_at_end(self) -> bool:
