@@ -87,6 +87,10 @@ class _Host:
         """True while the stick is held or lines await an answer."""
         return self.stick is not None or self.ledger.waiting(ENGINE) > 0
 
+    def reset_outputs(self) -> list[Output]:
+        """A reset: the reference methods send nothing of their own."""
+        return []
+
     def reset_machine(self, limits: EngineLimits) -> None:
         """A reset: the reference methods simply carry on with the new limits."""
         self.limits = limits

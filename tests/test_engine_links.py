@@ -90,3 +90,26 @@ def test_a_report_held_up_by_a_wifi_stall_on_a_fast_machine_is_no_fault() -> Non
     vs.run_until(vs.now_s + 8.0)
     assert [e.text for e in vs.events if e.kind == "fault"] == []
     assert vs.host.model.state == "Jog"
+
+
+def test_a_reset_with_jog_lines_unanswered_is_followed_at_once_by_a_cancel() -> None:
+    # Lines sent after the reset but before its banner came back start the restarted machine
+    # as they arrive; a 0x85 written the moment the banner is read arrives right behind them
+    # (the wire keeps the order), ahead of the re-handshake's `$I`.
+    vs = _jogging("wifi-bridge", 1.0)
+    vs.run_until(vs.now_s + 1.0)
+    sent: list[bytes] = []
+    real_send = vs.rig.host_send
+
+    def record(data: bytes, now_s: float) -> float:
+        sent.append(data)
+        return real_send(data, now_s)
+
+    vs.rig.host_send = record  # type: ignore[method-assign]
+    real_send(b"\x18", vs.now_s)  # another program resets the controller
+    vs.run_until(vs.now_s + 1.5)
+    after = b"".join(sent)
+    assert b"$I\n" in after  # the re-handshake ran
+    assert b"\x85" in after[: after.index(b"$I\n")]
+    assert vs.engine is not None
+    assert any("the controller was reset" in e.text for e in vs.events)

@@ -37,6 +37,7 @@ from smoothjog.core.jogger import (
     JogTuning,
     Output,
     SendLine,
+    SendRealtime,
 )
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger
 from smoothjog.core.machine import KeepOut, MachineModel
@@ -71,6 +72,9 @@ class JogEngine(Protocol):
 
     def busy(self) -> bool:
         """True while the engine still has work in hand."""
+
+    def reset_outputs(self) -> list[Output]:
+        """What to send the moment a banner arrives, before the re-handshake's first line."""
 
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset)."""
@@ -443,6 +447,12 @@ class Host:
                 self._room.set()
             if driver is not None and not driver.on_response(resp, now_s):
                 poke = False  # a routine report: the engine's own deadline comes soon enough
+            if isinstance(resp, Banner) and driver is not None:
+                # Written now, ahead of the re-handshake's lines (a cancel for jog lines still
+                # on their way to the restarted controller).
+                for output in driver.reset_outputs():
+                    if isinstance(output, SendRealtime):
+                        self.send_realtime(ENGINE, output.byte)
             if port is not None:
                 port.queue.put_nowait(raw)
             if isinstance(resp, Banner) and driver is not None and port is None:

@@ -482,6 +482,8 @@ class Jogger:
         #: A jog cancel (smoothjog's or an outside one) may still be ending: no report since
         #: showed a state other than Jog or a jog running unbraked.
         self._cancel_ending = False
+        #: A banner came with jog lines unanswered: one 0x85 goes out at once (reset_outputs).
+        self._reset_cancel = False
         self._idle_since_s: float | None = None  # the first of the Idle reports in a row
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
@@ -722,7 +724,9 @@ class Jogger:
                 "check why it reset; smoothjog re-reads its settings before jogging again",
             )
             # Lines still on the wire when it restarted run as new jogs: owe them a cancel
-            # (computed before the replies they will never get are forgotten).
+            # (computed before the replies they will never get are forgotten), and send one at
+            # once (reset_outputs).
+            self._reset_cancel = jogs > 0
             self._abandon_motion()
             self._forget_pending()
         elif isinstance(resp, Message) and resp.text == "Check Door":
@@ -731,6 +735,22 @@ class Jogger:
             # buffer would run after the resume) and cancel those still unanswered then.
             self._abandon_motion()
         return True
+
+    def reset_outputs(self) -> list[Output]:
+        """What to send the moment a banner shows the controller reset, before anything else.
+
+        Jog lines sent before the banner was seen may still be on their way: each starts a jog
+        on the restarted controller as it arrives. The link keeps the order of bytes, so a
+        0x85 sent now arrives right behind the last of them, while it is still speeding up,
+        and cancels what they started. No cancel is under way after a restart for it to
+        land in the end of (firmware-facts §3.8); with nothing running it is dropped.
+        """
+        if not self._reset_cancel:
+            return []
+        self._reset_cancel = False
+        self._cancel_ending = True
+        self.stats.cancels += 1
+        return [SendRealtime(JOG_CANCEL)]
 
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset).
