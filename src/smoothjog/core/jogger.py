@@ -98,6 +98,9 @@ OUTSIDE_LAG_S = 0.03
 OUTSIDE_LAG_CAP_MM = 1.0
 #: Queue kept beyond the stopping distance and the committed segments however slow the jog.
 QUEUE_FLOOR_MM = 0.3
+#: The least distance a `FS:0` report may still leave to the end of the queue with nothing
+#: outside at work (see _lags_outside).
+FS_LEAD_FLOOR_MM = 0.1
 #: A stop this many steps (of the worst axis) off the path sent was not smoothjog's doing: the
 #: fuzz's worst tracked-minus-real without outside events is under one step.
 OFF_PATH_STOP_STEPS = 5.0
@@ -1934,12 +1937,18 @@ class Jogger:
             # run: a queue braking for its end (an edge, a keep-out) may still be that far
             # from it, ½·a·t² over the committed time.
             rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-            # (Half as long again as the committed time: the segment buffer's lead varies;
-            # and never more than the whole stop from the speed jogged, short at a slow jog.)
+            # Over a lead of twice the committed time (the segment buffer's lead varies by
+            # firmware): at most ½·a·t² at the end of a braking and never more than the whole
+            # stop from the speed jogged; at least 0.1 mm (FluidNC's slow jogs were seen
+            # resting 0.08 mm short at FS:0 with no outside stop).
             v_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
-            committed_mm = min(
-                0.5 * move.accel_mm_s2 * (1.5 * self.tuning.committed_s) ** 2,
-                inc.stop_distance_mm(v_mm_s, move.accel_mm_s2),
+            lead_s = 2.0 * self.tuning.committed_s
+            committed_mm = max(
+                min(
+                    0.5 * move.accel_mm_s2 * lead_s**2,
+                    inc.stop_distance_mm(v_mm_s, move.accel_mm_s2),
+                ),
+                FS_LEAD_FLOOR_MM,
             )
             if (
                 rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
