@@ -54,6 +54,9 @@ class JogCancel:
     drops_blocked_jog: bool
     #: A feed hold `!` sent in Jog cancels the jog exactly like 0x85 (Grbl, FluidNC).
     feed_hold_cancels: bool
+    #: A 0x85 landing in a cancel's last moments leaves the controller suspended in Idle, taking
+    #: no line until `~` (Grbl 1.1h, firmware-facts §3.8; not checked on grblHAL and FluidNC).
+    late_cancel_suspends: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +98,12 @@ GRBL: Final = FirmwareFacts(
     planner_blocks_hidden=0,
     rx_buffer_bytes=128,
     tx_buffer_bytes=104,
-    jog_cancel=JogCancel(flushes_rx=False, drops_blocked_jog=False, feed_hold_cancels=True),
+    jog_cancel=JogCancel(
+        flushes_rx=False,
+        drops_blocked_jog=False,
+        feed_hold_cancels=True,
+        late_cancel_suspends=True,
+    ),
     jog_clip=JogClip.REJECT,
 )
 

@@ -1521,7 +1521,8 @@ class Jogger:
         """Before lines are given up as lost: a Grbl 1.1h that reports Idle yet answers no line
         may be suspended by a 0x85 that reached it as a cancel ended (firmware-facts §3.8);
         `~` releases it. In a plain Idle it does nothing (its planner is empty)."""
-        if self.limits.firmware == "grbl" and self.model.state == "Idle":
+        facts = firmware_facts(self.limits.firmware).jog_cancel
+        if facts.late_cancel_suspends and self.model.state == "Idle":
             out.append(SendRealtime(CYCLE_START))
             self.stats.suspend_releases += 1
 
