@@ -16,6 +16,7 @@ handshake's state in stopper.py.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -1157,14 +1158,19 @@ class Jogger:
         reported = track.x_reported_mm
         x_mm = min(track.x_est_mm, reported if reported is not None else 0.0)
         grow = 0.5 * self._inset_mm()
-        for seg in track.path:
+        zones = [
+            (tuple(v - grow for v in zone.min_mm), tuple(v + grow for v in zone.max_mm))
+            for zone in self.limits.keepouts
+        ]
+        # The path behind the machine (kept for late reports) is skipped by bisection: this
+        # runs for every line sent near a zone.
+        first = track.seg_index_at(x_mm) or 0
+        for seg in itertools.islice(track.path, first, None):
             if seg.x0_mm + seg.length_mm <= x_mm:
                 continue
             a = track.point_at(x_mm) if seg.x0_mm < x_mm else seg.start_mm
             b = seg.end_mm
-            for zone in self.limits.keepouts:
-                lo = tuple(v - grow for v in zone.min_mm)
-                hi = tuple(v + grow for v in zone.max_mm)
+            for lo, hi in zones:
                 # Most pieces are nowhere near a zone: their sweep's bounding box tells.
                 if any(
                     min(ai, bi) + min(di, 0.0) >= h or max(ai, bi) + max(di, 0.0) <= lw
@@ -1922,26 +1928,26 @@ class Jogger:
         feed = report.feed
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
         step_mm = 1.0 / min(self.limits.steps_per_mm)
-        planned = [seg for seg in self._track.path if seg.acked]
+        acked_end_mm = self._acked_end_mm()
         # At speed: the commanded one, or that of the jog it is on (a slide along a keep-out or
         # the envelope runs slower than the stick asks).
         here = self._track.seg_at(self._track.x_est_mm)
         seg_mm_min = mm_s_to_mm_min(here.speed_mm_s) if here is not None else cmd_mm_min
         if feed is not None and feed >= 0.95 * min(cmd_mm_min, seg_mm_min):
             self._cruised = True
-        elif feed == 0.0 and self._cruised and asked_s is not None and planned:
+        elif feed == 0.0 and self._cruised and asked_s is not None and acked_end_mm is not None:
             # At rest in Jog with acknowledged path ahead, after this run was seen at speed:
             # a turn never slows the planner to 0 (the engine stops for a reversal), and a
             # queue that ran dry rests at its end, so wherever the estimate stands (by a
             # junction, on a slide) only someone else's stop rests here. FS is the speed of
             # the segments being prepared, which reaches 0 while the committed ones still
-            # run: a queue braking for its end (an edge, a keep-out) may still be that far
-            # from it, ½·a·t² over the committed time.
-            rest_ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
-            # Over a lead of twice the committed time (the segment buffer's lead varies by
-            # firmware): at most ½·a·t² at the end of a braking and never more than the whole
-            # stop from the speed jogged; at least 0.1 mm (FluidNC's slow jogs were seen
-            # resting 0.08 mm short at FS:0 with no outside stop).
+            # run: a queue braking for its end (an edge, a keep-out) may still be short of
+            # it by what they cover over a lead of twice the committed time (the segment
+            # buffer's lead varies by firmware): at most ½·a·t² at the end of a braking and
+            # never more than the whole stop from the speed jogged; at least 0.1 mm
+            # (FluidNC's slow jogs were seen resting 0.08 mm short at FS:0 with no outside
+            # stop).
+            rest_ahead_mm = acked_end_mm - self._track.x_est_mm
             v_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
             lead_s = 2.0 * self.tuning.committed_s
             committed_mm = max(
@@ -1962,21 +1968,20 @@ class Jogger:
             return None
         if (feed is not None and feed >= 0.9 * cmd_mm_min) or asked_s is None:
             return None
-        seg = self._track.seg_at(self._track.x_est_mm)
-        if seg is None or seg.unit_vec is None or self._near_a_slow_junction(move):
+        if here is None or here.unit_vec is None or self._near_a_slow_junction(move):
             # Only a cruise is judged (the same unclipped increment repeated): at a turn, a
             # slide along an edge or a speed change the machine slows and the estimate follows
             # it less closely. Judge again once it is back at speed.
             self._seen_at_speed = None
             return None
-        if not planned:
+        if acked_end_mm is None:
             return None
         # The planner holds at least the acknowledged jogs; a machine braking for their end
         # (lines late on a stalled link) has no more ahead of it than it needs to stop from
         # the speed it reports. One braking with more ahead was stopped by someone else.
         speed_mm_s = mm_min_to_mm_s(feed) if feed is not None else self._track.v_est_mm_s
         age_s = max(now_s - asked_s, 0.0)
-        ahead_mm = planned[-1].x0_mm + planned[-1].length_mm - self._track.x_est_mm
+        ahead_mm = acked_end_mm - self._track.x_est_mm
         needed_mm = (
             inc.stop_distance_mm(speed_mm_s, move.accel_mm_s2)
             + speed_mm_s * age_s
@@ -2002,6 +2007,14 @@ class Jogger:
             )
         if lag_mm > allowed_mm + margin_mm:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
+        return None
+
+    def _acked_end_mm(self) -> float | None:
+        """Where along the path the acknowledged jogs end (replies come in order, so they are
+        a prefix of the path), or None before the first ok."""
+        for seg in reversed(self._track.path):
+            if seg.acked:
+                return seg.x0_mm + seg.length_mm
         return None
 
     def _near_a_junction_at_rest(self) -> bool:
