@@ -130,6 +130,16 @@ def _link_models() -> dict[str, LinkModel]:
     """The named links of the benchmark and the fuzz."""
     one_way_telnet = (0.0025, 0.0225)  # RTT 5-50 ms: each way 2.5-25 ms
     one_way_bridge = (0.020, 0.040)  # RTT 40-120 ms: each way 20-60 ms
+    wifi = LinkModel(
+        baud=1_000_000,
+        bits_per_byte=8,
+        latency_s=one_way_telnet[0],
+        jitter_s=one_way_telnet[1],
+        jitter_shape="skewed",
+        seed=3,
+        description="ESP32 / FluidNC telnet over Wi-Fi: RTT 5-50 ms (skewed), in order, "
+        "no loss; no UART (the controller's TCP output, taken as 1 Mbit/s)",
+    )
     return {
         "ideal": LinkModel(description="115200 baud 8N1 straight into the controller, no latency"),
         "ch340": LinkModel(
@@ -145,22 +155,9 @@ def _link_models() -> dict[str, LinkModel]:
             description="FTDI USB-serial at 115200: replies held until its 16 ms latency timer "
             "expires or 62 bytes fill a packet; host-to-controller within one 1 ms USB frame",
         ),
-        "wifi": LinkModel(
-            baud=1_000_000,
-            bits_per_byte=8,
-            latency_s=one_way_telnet[0],
-            jitter_s=one_way_telnet[1],
-            jitter_shape="skewed",
-            seed=3,
-            description="ESP32 / FluidNC telnet over Wi-Fi: RTT 5-50 ms (skewed), in order, "
-            "no loss; no UART (the controller's TCP output, taken as 1 Mbit/s)",
-        ),
-        "wifi-stalls": LinkModel(
-            baud=1_000_000,
-            bits_per_byte=8,
-            latency_s=one_way_telnet[0],
-            jitter_s=one_way_telnet[1],
-            jitter_shape="skewed",
+        "wifi": wifi,
+        "wifi-stalls": dataclasses.replace(
+            wifi,
             stall_s=0.200,
             stall_gap_s=(2.5, 3.5),
             seed=4,
