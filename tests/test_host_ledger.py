@@ -16,6 +16,7 @@ from smoothjog.core.errors import ConnectError
 from smoothjog.core.ledger import CONSOLE, HANDSHAKE, Entry, foreign
 from smoothjog.core.responses import ErrorReply, GcodeModes, Ok, StatusReport
 from smoothjog.host import Host
+from smoothjog.links.base import RefusedError
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.rig import LinkModel, SimRig
@@ -61,6 +62,20 @@ def test_a_console_query_returns_its_output_and_reply() -> None:
         assert isinstance(got[-1], Ok)
         bad = await host.query("G5")
         assert bad[-1] == ErrorReply(20)  # unsupported command: the console sees its own error
+
+    run_virtual(body)
+
+
+def test_a_line_the_link_refuses_is_never_counted_in_the_ledger() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        for text in ("G0 X1 ?", "G0\nX1", "G0 X1 \u00b5"):
+            with pytest.raises(RefusedError):
+                await host.write_line(CONSOLE, text)
+        assert host.ledger.stats.lines[CONSOLE] == 0
+        assert host.ledger.in_flight_bytes == 0
+        # The console still works: nothing was left unanswered in the count.
+        lines, reply = await host.console("$G")
+        assert reply == Ok() and lines[0].startswith("[GC:")
 
     run_virtual(body)
 

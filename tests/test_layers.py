@@ -20,9 +20,10 @@ ALLOWED: dict[str, set[str]] = {
     "handshake": {"core"},
     "host": {"core", "links", "handshake"},
     "arbiter": {"core", "inputs"},
+    "control": {"core", "links", "host"},  # machine commands beside the engine, over the host
     "virtual": {"core", "sim", "links", "inputs", "host", "vclock"},
     "config": {"core", "links"},  # it checks tcp:// URLs with the TCP link's own parser
-    "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs"},
+    "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs", "control"},
     "cli": {
         "core",
         "sim",
@@ -34,6 +35,7 @@ ALLOWED: dict[str, set[str]] = {
         "virtual",
         "handshake",
         "config",
+        "control",
         "web",
     },
 }

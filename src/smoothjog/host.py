@@ -42,9 +42,16 @@ from smoothjog.core.jogger import (
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import JOG_CANCEL
-from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, parse_response
+from smoothjog.core.responses import (
+    Banner,
+    ErrorReply,
+    Ok,
+    Response,
+    StatusReport,
+    parse_response,
+)
 from smoothjog.handshake import handshake
-from smoothjog.links.base import Link
+from smoothjog.links.base import Link, encode_line
 
 logger = logging.getLogger(__name__)
 
@@ -162,6 +169,7 @@ class Host:
         self._rehandshake_task: asyncio.Task[None] | None = None
         self._port: _QueryPort | None = None
         self._listeners: list[LineListener] = []
+        self._raw_listeners: list[Callable[[bytes, Response], None]] = []
         self._reply_handlers: dict[str, Callable[[Entry, Ok | ErrorReply, float], None]] = {
             CONSOLE: _resolve_console_reply,
         }
@@ -251,9 +259,14 @@ class Host:
 
     # ----------------------------------------------------------------- other owners
     async def write_line(self, owner: str, text: str, *, tag: object = None) -> Entry:
-        """Send a line for owner once the controller's RX buffer has room; return its entry."""
+        """Send a line for owner once the controller's RX buffer has room; return its entry.
+
+        A line the link would refuse raises RefusedError before anything is recorded, so the
+        ledger never counts bytes that were not sent.
+        """
         assert self._room is not None
         assert self._write_lock is not None
+        encode_line(text)
         while True:
             if self.link_error is not None:
                 raise self.link_error
@@ -300,6 +313,42 @@ class Host:
         finally:
             self._listeners.remove(collect)
         return [*seen, reply]
+
+    async def console(
+        self, text: str, *, timeout_s: float = 5.0
+    ) -> tuple[list[str], Ok | ErrorReply]:
+        """Send a console line; return the lines printed up to its reply (as text) and the reply.
+
+        Status reports and the reply itself are left out of the lines; they are what `query`
+        returns parsed.
+        """
+        printed: list[str] = []
+
+        def keep(raw: bytes, resp: Response) -> None:
+            if not isinstance(resp, Ok | ErrorReply | StatusReport):
+                printed.append(raw.decode("ascii", "replace").rstrip("\r\n"))
+
+        self._raw_listeners.append(keep)
+        try:
+            responses = await self.query(text, timeout_s=timeout_s)
+        finally:
+            self._raw_listeners.remove(keep)
+        reply = responses[-1]
+        assert isinstance(reply, Ok | ErrorReply)
+        return printed, reply
+
+    async def reread_settings(self, *, timeout_s: float = 5.0) -> None:
+        """Read `$$` again and give the engine the limits it now implies (only while idle)."""
+        await self.query("$$", timeout_s=timeout_s)
+        driver = self.driver
+        if driver is not None and not driver.busy():
+            driver.reset_machine(EngineLimits.from_model(self.model, self.keepouts))
+            self._poke()
+
+    @property
+    def rehandshaking(self) -> bool:
+        """True while the settings are read again after a mid-session reset."""
+        return self._rehandshake_task is not None
 
     def add_reply_handler(
         self, owner: str, handler: Callable[[Entry, Ok | ErrorReply, float], None]
@@ -457,6 +506,8 @@ class Host:
                 port.queue.put_nowait(raw)
             if isinstance(resp, Banner) and driver is not None and port is None:
                 self._start_rehandshake()
+        for raw_listener in list(self._raw_listeners):
+            raw_listener(raw, resp)
         for listener in list(self._listeners):
             try:
                 listener(resp, now_s)

@@ -1,0 +1,231 @@
+"""Machine control (control.py) through the real host against the simulated Grbl, virtual time."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Awaitable, Iterator
+from typing import TypeVar
+
+import pytest
+
+from smoothjog.control import CommandResult, ControlRefused, MachineControl
+from smoothjog.core.intents import ContinuousIntent, GotoIntent
+from smoothjog.core.ledger import CONSOLE
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
+from smoothjog.sim.rig import SimRig
+from smoothjog.virtual import VirtualHost
+
+T = TypeVar("T")
+
+
+def _vhost(start: str = "homed", firmware: str = "grbl") -> VirtualHost:
+    machine = dataclasses.replace(load_machine_profile("hobby-router"), start=start)
+    rig = SimRig(GrblFirmware(get_firmware_profile(firmware), machine))
+    vh = VirtualHost(rig)
+    vh.handshake()
+    return vh
+
+
+@pytest.fixture
+def vh() -> Iterator[VirtualHost]:
+    host = _vhost()
+    yield host
+    host.close()
+
+
+@pytest.fixture
+def alarmed() -> Iterator[VirtualHost]:
+    host = _vhost("power-up")
+    yield host
+    host.close()
+
+
+def run(vh: VirtualHost, aw: Awaitable[T]) -> T:
+    return vh._run(aw)
+
+
+def control(vh: VirtualHost) -> MachineControl:
+    return MachineControl(vh.host)
+
+
+def test_unlock_leaves_alarm_but_an_unhomed_machine_still_may_not_jog(alarmed: VirtualHost) -> None:
+    vh = alarmed
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state == "Alarm"
+    result = run(vh, control(vh).unlock())
+    assert result == CommandResult("$X", True, ("[MSG:Caution: Unlocked]",))
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state == "Idle"
+    # Unlocked at MPos 0 with soft limits on: every + jog would fail (firmware-facts §2), so the
+    # engine still asks for homing; the pendant's warning beside Unlock says the same.
+    view = vh.host.view()
+    assert not view.can_jog and view.reason is not None and "home it with $H" in view.reason
+
+
+def test_home_runs_the_cycle_and_reads_the_modes_again(alarmed: VirtualHost) -> None:
+    vh = alarmed
+    c = control(vh)
+    seen: list[str | None] = []
+
+    async def home_and_watch() -> CommandResult:
+        task = vh.loop.create_task(c.home())
+        await __import__("asyncio").sleep(0.5)
+        seen.append(c.running)
+        seen.append(c.refusal())
+        return await task
+
+    result = run(vh, home_and_watch())
+    assert result.ok, result
+    assert seen[0] == "homing"
+    assert seen[1] == "wait: homing has not finished"
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state == "Idle"
+    assert vh.rig.firmware.mpos_mm() == pytest.approx((-1.0, -1.0, -1.0))
+
+
+def test_a_jog_is_refused_in_words_while_homing(alarmed: VirtualHost) -> None:
+    import asyncio
+
+    from smoothjog.web.session_backend import SessionBackend
+
+    vh = alarmed
+    backend = SessionBackend(vh.host)
+    answers: list[tuple[bool, str | None]] = []
+
+    async def scenario() -> None:
+        task = vh.loop.create_task(backend.command("home", {}))
+        await asyncio.sleep(0.5)
+        answers.append(backend.can_jog())
+        await task
+        await asyncio.sleep(0.3)
+        answers.append(backend.can_jog())
+
+    run(vh, scenario())
+    assert answers[0] == (False, "jogging waits: homing is running")
+    assert answers[1] == (True, None)
+
+
+def test_home_is_refused_without_homing_switches() -> None:
+    rig = SimRig(GrblFirmware(machine="grbl-defaults"))
+    vh = VirtualHost(rig)
+    vh.handshake()
+    try:
+        with pytest.raises(ControlRefused, match=r"homing is not enabled .*\$22=0"):
+            run(vh, control(vh).home())
+    finally:
+        vh.close()
+
+
+def test_work_zero_of_all_axes_and_one_axis(vh: VirtualHost) -> None:
+    c = control(vh)
+    vh.set_intent(GotoIntent({"X": -100.0, "Y": -50.0, "Z": -20.0}, 1.0))
+    assert vh.run_until_idle(10.0)
+    result = run(vh, c.set_work_zero(["X", "Y", "Z"]))
+    assert result == CommandResult("G10L20P0X0Y0Z0", True)
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.wpos_mm == pytest.approx((0.0, 0.0, 0.0))
+    assert vh.model.offsets_mm["G54"] == pytest.approx((-100.0, -50.0, -20.0))
+    vh.set_intent(GotoIntent({"X": -90.0}, 1.0))
+    assert vh.run_until_idle(10.0)
+    assert run(vh, c.set_work_zero(["X"])).ok
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.offsets_mm["G54"] == pytest.approx((-90.0, -50.0, -20.0))
+
+
+def test_choosing_another_work_system_shows_in_the_modes(vh: VirtualHost) -> None:
+    c = control(vh)
+    assert run(vh, c.select_wcs("G55")).ok
+    assert vh.model.modal.wcs == "G55"
+    with pytest.raises(ControlRefused, match="G60"):
+        run(vh, c.select_wcs("G60"))
+
+
+def test_go_to_work_zero_lifts_z_first_and_lands_on_zero(vh: VirtualHost) -> None:
+    c = control(vh)
+    vh.set_intent(GotoIntent({"X": -300.0, "Y": -300.0, "Z": -60.0}, 1.0))
+    assert vh.run_until_idle(20.0)
+    assert run(vh, c.set_work_zero(["X", "Y", "Z"])).ok
+    vh.set_intent(GotoIntent({"X": -100.0, "Y": -200.0, "Z": -80.0}, 1.0))
+    assert vh.run_until_idle(20.0)
+    vh.run_until(vh.now_s + 0.3)
+    targets = c.work_zero_targets()
+    # Up to 1 mm below the top of Z travel (soft limits give it), across, then down.
+    assert targets == [{"Z": pytest.approx(-1.0)}, {"X": -300.0, "Y": -300.0}, {"Z": -60.0}]
+    trace_from = len(vh.rig.firmware.trace)
+    for target in targets:
+        vh.set_intent(GotoIntent(target, 1.0))
+    assert vh.run_until_idle(30.0)
+    assert vh.rig.firmware.mpos_mm() == pytest.approx((-300.0, -300.0, -60.0), abs=0.01)
+    # X and Y moved only while Z stood at the safe height.
+    for seg in vh.rig.firmware.trace[trace_from:]:
+        if seg.start_mm[:2] != seg.end_mm[:2]:
+            assert min(seg.start_mm[2], seg.end_mm[2]) > -1.5, seg
+
+
+def test_console_line_returns_what_the_controller_printed(vh: VirtualHost) -> None:
+    c = control(vh)
+    result = run(vh, c.console("$G"))
+    assert result.ok
+    assert len(result.lines) == 1 and result.lines[0].startswith("[GC:G0 G54 G17 G21 G90")
+    bad = run(vh, c.console("G1 X1"))  # no feed rate
+    assert not bad.ok
+    assert bad.error is not None and bad.error.startswith("error:22 ")
+    # The console is its own owner in the ledger and got both its replies; none is left open.
+    stats = vh.host.ledger.stats
+    assert stats.lines[CONSOLE] == stats.replies[CONSOLE] >= 2
+    assert stats.unowned_replies == 0
+    assert vh.host.ledger.outstanding(CONSOLE) == ()
+
+
+def test_console_refuses_what_cannot_be_sent_without_writing_anything(vh: VirtualHost) -> None:
+    c = control(vh)
+    for line, why in (("", "type a line"), ("G0 X1 ?", "realtime"), ("X" * 90, "at most 79")):
+        with pytest.raises(ControlRefused, match=why):
+            run(vh, c.console(line))
+    assert vh.host.ledger.stats.lines[CONSOLE] == 0
+
+
+def test_a_setting_changed_from_the_console_reaches_the_engine(vh: VirtualHost) -> None:
+    c = control(vh)
+    engine = vh.engine
+    assert engine is not None
+    assert engine.limits.max_rate_mm_min[0] == 5000.0
+    assert run(vh, c.console("$110=3000")).ok
+    assert vh.model.settings.max_rate_mm_min[0] == 3000.0
+    assert engine.limits.max_rate_mm_min[0] == 3000.0
+
+
+def test_nothing_is_sent_while_a_jog_moves(vh: VirtualHost) -> None:
+    c = control(vh)
+    vh.set_intent(ContinuousIntent({"X": -1.0}, 0.5))
+    vh.run_until(vh.now_s + 0.3)
+    for command in (c.unlock(), c.console("$G"), c.set_work_zero(["X"]), c.override("feed", "+10")):
+        with pytest.raises(ControlRefused, match="press STOP"):
+            run(vh, command)
+    stats = vh.host.ledger.stats
+    assert stats.lines[CONSOLE] == 0 and stats.realtime[CONSOLE] == 0
+
+
+def test_overrides_change_the_reported_values(vh: VirtualHost) -> None:
+    c = control(vh)
+    assert run(vh, c.override("feed", "+10")).ok
+    assert run(vh, c.override("rapid", "25")).ok
+    vh.run_until(vh.now_s + 0.5)
+    assert vh.model.overrides[:2] == (110, 25)
+    with pytest.raises(ControlRefused, match="use reset"):
+        run(vh, c.override("feed", "+50"))
+    with pytest.raises(ControlRefused, match="no override 'spin'"):
+        run(vh, c.override("spin", "+10"))
+
+
+def test_soft_reset_restarts_and_the_host_reads_it_again(vh: VirtualHost) -> None:
+    c = control(vh)
+    resets = vh.model.reset_count
+    result = run(vh, c.soft_reset())
+    assert result == CommandResult("Ctrl-X", True)
+    assert vh.model.reset_count == resets + 1
+    assert not vh.host.rehandshaking
+    vh.set_intent(ContinuousIntent({"X": -1.0}, 0.2))
+    vh.run_until(vh.now_s + 0.5)
+    assert vh.rig.firmware.mpos_mm()[0] < -2.0
