@@ -60,7 +60,9 @@ def test_unlock_leaves_alarm_but_an_unhomed_machine_still_may_not_jog(alarmed: V
     # Unlocked at MPos 0 with soft limits on: every + jog would fail (firmware-facts §2), so the
     # engine still asks for homing; the pendant's warning beside Unlock says the same.
     view = vh.host.view()
-    assert not view.can_jog and view.reason is not None and "home it with $H" in view.reason
+    assert not view.can_jog
+    assert view.reason is not None
+    assert "home it with $H" in view.reason
 
 
 def test_home_runs_the_cycle_and_reads_the_modes_again(alarmed: VirtualHost) -> None:
@@ -167,10 +169,12 @@ def test_console_line_returns_what_the_controller_printed(vh: VirtualHost) -> No
     c = control(vh)
     result = run(vh, c.console("$G"))
     assert result.ok
-    assert len(result.lines) == 1 and result.lines[0].startswith("[GC:G0 G54 G17 G21 G90")
+    assert len(result.lines) == 1
+    assert result.lines[0].startswith("[GC:G0 G54 G17 G21 G90")
     bad = run(vh, c.console("G1 X1"))  # no feed rate
     assert not bad.ok
-    assert bad.error is not None and bad.error.startswith("error:22 ")
+    assert bad.error is not None
+    assert bad.error.startswith("error:22 ")
     # The console is its own owner in the ledger and got both its replies; none is left open.
     stats = vh.host.ledger.stats
     assert stats.lines[CONSOLE] == stats.replies[CONSOLE] >= 2
@@ -204,7 +208,8 @@ def test_nothing_is_sent_while_a_jog_moves(vh: VirtualHost) -> None:
         with pytest.raises(ControlRefused, match="press STOP"):
             run(vh, command)
     stats = vh.host.ledger.stats
-    assert stats.lines[CONSOLE] == 0 and stats.realtime[CONSOLE] == 0
+    assert stats.lines[CONSOLE] == 0
+    assert stats.realtime[CONSOLE] == 0
 
 
 def test_overrides_change_the_reported_values(vh: VirtualHost) -> None:

@@ -1,8 +1,9 @@
 """The contract between the pendant server and whatever drives the machine behind it.
 
-The server (and the arbiter it submits through) only ever calls these four methods, from the
-event loop thread, and never awaits them: each must return quickly (queue the work, do not wait
-for the controller). The jog session implements it for real; tests implement it with a recorder.
+The server (and the arbiter it submits through) calls these methods from the event loop thread.
+All but `command` return at once (queue the work, do not wait for the controller); `command` is
+awaited in a task of its own and may take as long as the controller does (homing). The jog
+session implements it for real; tests implement it with a recorder.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Protocol, runtime_checkable
 
+from smoothjog.control import CommandResult
 from smoothjog.core.intents import Intent
 
 #: The keys of the snapshot `PendantBackend.view()` returns; docs/pendant.md explains each one.
@@ -36,6 +38,24 @@ VIEW_KEYS: frozenset[str] = frozenset(
         "max_rate_mm_min",
         "speed_ratios",
         "moving",
+        "control",
+    }
+)
+
+#: The keys of the view's "control" object: what machine control the page may offer now.
+CONTROL_KEYS: frozenset[str] = frozenset(
+    {
+        "can_command",
+        "reason",
+        "running",
+        "homing",
+        "wcs",
+        "wcs_list",
+        "offsets",
+        "wco",
+        "overrides",
+        "modal",
+        "steps_per_mm",
     }
 )
 
@@ -67,4 +87,16 @@ class PendantBackend(Protocol):
 
     def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
         """Set the relative top speed of each axis, e.g. {"X": 1, "Y": 1, "Z": 0.25}."""
+        ...
+
+    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+        """Run one machine command (unlock, home, reset, zero, wcs, override, console).
+
+        Raises ControlRefused in words when it cannot run now (the machine moves, another
+        command runs) or is malformed; a command the controller rejects returns ok False.
+        """
+        ...
+
+    def work_zero_targets(self) -> list[dict[str, float]]:
+        """The machine positions that lead to work zero, Z first up; raises ControlRefused."""
         ...

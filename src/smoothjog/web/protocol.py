@@ -67,7 +67,37 @@ class TakeControlMessage:
     """A watcher asks to become the controlling client."""
 
 
-ClientMessage = JogMessage | StopMessage | StepMessage | RatiosMessage | TakeControlMessage
+#: Machine commands the page may ask for, and what each needs beside its name.
+COMMAND_NAMES: Final = (
+    "unlock",
+    "home",
+    "reset",
+    "zero",
+    "goto_zero",
+    "wcs",
+    "override",
+    "console",
+)
+#: The longest console line accepted from the page (grblHAL reads 256 characters).
+CONSOLE_MAX_CHARS: Final = 256
+
+
+@dataclass(frozen=True)
+class CommandMessage:
+    """A machine command (unlock, home, a console line...); `id` matches its result."""
+
+    name: str
+    id: int
+    axes: tuple[str, ...] = ()
+    wcs: str = ""
+    kind: str = ""
+    step: str = ""
+    line: str = ""
+
+
+ClientMessage = (
+    JogMessage | StopMessage | StepMessage | RatiosMessage | TakeControlMessage | CommandMessage
+)
 
 
 def _reject_constant(name: str) -> float:
@@ -146,9 +176,51 @@ def parse_client_message(text: str | bytes, known_axes: Sequence[str]) -> Client
         return RatiosMessage(ratios=ratios)
     if kind == "take_control":
         return TakeControlMessage()
+    if kind == "command":
+        return _command(data, known_axes)
     raise PendantMessageError(
-        f"unknown message type {json.dumps(kind)}; expected jog, stop, step, ratios or take_control"
+        f"unknown message type {json.dumps(kind)}; expected jog, stop, step, ratios, "
+        "take_control or command"
     )
+
+
+def _text(value: object, what: str, max_chars: int) -> str:
+    if not isinstance(value, str):
+        raise PendantMessageError(f"{what} must be a string, got {json.dumps(value)}")
+    if len(value) > max_chars:
+        raise PendantMessageError(f"{what} is longer than {max_chars} characters")
+    return value
+
+
+def _command(data: Mapping[str, object], known_axes: Sequence[str]) -> CommandMessage:
+    """Check the shape of a command; whether it may run now is the machine side's decision."""
+    name = data.get("name")
+    if name not in COMMAND_NAMES:
+        raise PendantMessageError(
+            f"unknown command {json.dumps(name)}; expected one of {', '.join(COMMAND_NAMES)}"
+        )
+    raw_id = data.get("id", 0)
+    if isinstance(raw_id, bool) or not isinstance(raw_id, int) or not 0 <= raw_id < 2**31:
+        raise PendantMessageError(f"id must be a whole number from 0, got {json.dumps(raw_id)}")
+    assert isinstance(name, str)
+    if name == "zero":
+        axes = data.get("axes")
+        if not isinstance(axes, list) or not axes:
+            raise PendantMessageError('zero needs "axes", a list such as ["X", "Y"]')
+        picked = tuple(dict.fromkeys(_axis(a, known_axes, "axes item") for a in axes))
+        return CommandMessage(name, raw_id, axes=picked)
+    if name == "wcs":
+        return CommandMessage(name, raw_id, wcs=_text(data.get("wcs"), "wcs", 8))
+    if name == "override":
+        return CommandMessage(
+            name,
+            raw_id,
+            kind=_text(data.get("kind"), "kind", 16),
+            step=_text(data.get("step"), "step", 8),
+        )
+    if name == "console":
+        return CommandMessage(name, raw_id, line=_text(data.get("line"), "line", CONSOLE_MAX_CHARS))
+    return CommandMessage(name, raw_id)
 
 
 def _finite_or_none(value: object) -> object:
@@ -171,6 +243,20 @@ def view_message(view: Mapping[str, object]) -> dict[str, object]:
 def role_message(role: str, *, controlled: bool, deadman_s: float) -> dict[str, object]:
     """Tell a client its role; `controlled` says whether some client holds control."""
     return {"type": "role", "role": role, "controlled": controlled, "deadman_s": deadman_s}
+
+
+def result_message(
+    command_id: int, command: str, *, ok: bool, lines: Sequence[str], error: str | None
+) -> dict[str, object]:
+    """The outcome of one machine command: what was sent, what came back, and any error."""
+    return {
+        "type": "result",
+        "id": command_id,
+        "command": command,
+        "ok": ok,
+        "lines": list(lines),
+        "error": error,
+    }
 
 
 def error_message(text: str) -> dict[str, object]:

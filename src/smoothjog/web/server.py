@@ -31,12 +31,14 @@ from aiohttp import WSMsgType, web
 
 from smoothjog.arbiter import Arbiter
 from smoothjog.config import DEFAULT_HTTP_PORT
-from smoothjog.core.errors import InputRefused
-from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
+from smoothjog.control import ControlRefused
+from smoothjog.core.errors import InputRefused, SmoothjogError
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, Notice
 from smoothjog.web.backend import PendantBackend
 from smoothjog.web.protocol import (
     MAX_MESSAGE_BYTES,
+    CommandMessage,
     JogMessage,
     PendantError,
     PendantMessageError,
@@ -47,6 +49,7 @@ from smoothjog.web.protocol import (
     dumps,
     error_message,
     parse_client_message,
+    result_message,
     role_message,
     view_message,
 )
@@ -62,6 +65,8 @@ SEND_TIMEOUT_S: Final = 1.0
 DEFAULT_AXES: Final = ("X", "Y", "Z")
 #: Step jogs run at this fraction of the top jog speed (fine positioning wants control, not haste).
 STEP_SPEED: Final = 0.5
+#: "Go to work zero" runs at this fraction of the top jog speed.
+GOTO_SPEED: Final = 0.5
 
 _SECURITY_HEADERS: Final = {
     # Everything is served from here; nothing may be framed (click-jacking) or fetched elsewhere.
@@ -251,6 +256,14 @@ class PendantHub:
         if isinstance(message, RatiosMessage):
             await self._set_ratios(page, handle, message)
             return
+        if isinstance(message, CommandMessage):
+            if message.name == "goto_zero":
+                await self._goto_zero(page, handle, message)
+            else:
+                # A command may last as long as the controller takes (homing): its own task,
+                # so this page's heartbeats and STOP keep flowing meanwhile.
+                _spawn(self._command(page, message))
+            return
         try:
             handle.submit(_intent_of(message))
         except InputRefused as exc:
@@ -267,6 +280,43 @@ class PendantHub:
             with contextlib.suppress(InputRefused):
                 handle.submit(StopIntent())
             await self.refuse(page, f"jog refused: {exc}")
+
+    async def _command(self, page: WebInput, message: CommandMessage) -> None:
+        """Run one machine command and answer the page with its result, or why it cannot run."""
+        args = {
+            "axes": list(message.axes),
+            "wcs": message.wcs,
+            "kind": message.kind,
+            "step": message.step,
+            "line": message.line,
+        }
+        try:
+            result = await self.backend.command(message.name, args)
+        except ControlRefused as exc:
+            reply = result_message(message.id, message.name, ok=False, lines=(), error=str(exc))
+        except SmoothjogError as exc:
+            log.warning("pendant command %s failed: %s", message.name, exc)
+            reply = result_message(message.id, message.name, ok=False, lines=(), error=str(exc))
+        else:
+            reply = result_message(
+                message.id, result.command, ok=result.ok, lines=result.lines, error=result.error
+            )
+        await self.send(page, dumps(reply))
+
+    async def _goto_zero(
+        self, page: WebInput, handle: InputHandle, message: CommandMessage
+    ) -> None:
+        """Queue the moves to work zero as jogs, so STOP and the dead-man rules apply to them."""
+        try:
+            targets = self.backend.work_zero_targets()
+            for target in targets:
+                handle.submit(GotoIntent(target, GOTO_SPEED))
+        except (ControlRefused, InputRefused) as exc:
+            text = str(exc) if exc.__cause__ is None else f"jog refused: {exc}"
+            reply = result_message(message.id, "goto_zero", ok=False, lines=(), error=text)
+        else:
+            reply = result_message(message.id, "goto_zero", ok=True, lines=(), error=None)
+        await self.send(page, dumps(reply))
 
     async def _take_control(self, page: WebInput, handle: InputHandle) -> None:
         """Ask the arbiter for control; it refuses in words while another holds a jog."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from smoothjog.control import WCS_WORDS, CommandResult, ControlRefused, MachineControl
 from smoothjog.core.codes import describe_alarm
 from smoothjog.core.intents import Intent
 from smoothjog.host import Host
@@ -30,9 +31,16 @@ def _finite(values: object) -> list[float | None] | None:
 class SessionBackend:
     """PendantBackend over a started Host."""
 
-    def __init__(self, session: Host, *, speed_ratios: Mapping[str, float] | None = None):
-        """Wrap a session whose start() has completed."""
+    def __init__(
+        self,
+        session: Host,
+        *,
+        speed_ratios: Mapping[str, float] | None = None,
+        control: MachineControl | None = None,
+    ):
+        """Wrap a session whose start() has completed (and its machine control, if shared)."""
         self.session = session
+        self.control = control if control is not None else MachineControl(session)
         engine = session.engine
         if engine is None:
             raise RuntimeError("SessionBackend needs a started Host")
@@ -49,6 +57,9 @@ class SessionBackend:
         """The engine's verdict, and no jog at all once the link to the controller is lost."""
         if self.session.link_error is not None:
             return False, LINK_LOST
+        busy = self.control.busy_reason()
+        if busy is not None:
+            return False, f"jogging waits: {busy}"
         v = self.session.view()
         return v.can_jog, v.reason
 
@@ -56,6 +67,59 @@ class SessionBackend:
         """Per-axis top speed ratios in (0, 1]."""
         self.session.set_speed_ratios(ratios)
         self._ratios.update(ratios)
+
+    # ------------------------------------------------------------------ machine control
+    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+        """Run one machine command through the session's MachineControl."""
+        control = self.control
+        if name == "unlock":
+            return await control.unlock()
+        if name == "home":
+            return await control.home()
+        if name == "reset":
+            return await control.soft_reset()
+        if name == "zero":
+            axes = args.get("axes", ())
+            return await control.set_work_zero([str(a) for a in axes])  # type: ignore[attr-defined]
+        if name == "wcs":
+            return await control.select_wcs(str(args.get("wcs", "")))
+        if name == "override":
+            return await control.override(str(args.get("kind", "")), str(args.get("step", "")))
+        if name == "console":
+            return await control.console(str(args.get("line", "")))
+        raise ControlRefused(f"unknown command {name!r}")
+
+    def work_zero_targets(self) -> list[dict[str, float]]:
+        """Z up to a safe height, then X and Y, then Z down to work zero (machine positions)."""
+        reason = self.control.refusal()
+        if reason is not None:
+            raise ControlRefused(reason)
+        return self.control.work_zero_targets()
+
+    def _control_view(self) -> dict[str, object]:
+        session = self.session
+        model = session.model
+        control = self.control
+        reason = control.refusal()
+        offsets = {
+            name: list(values)
+            for name, values in model.offsets_mm.items()
+            if name in WCS_WORDS or name == "G92"
+        }
+        feed, rapid, spindle = model.overrides
+        return {
+            "can_command": reason is None,
+            "reason": reason,
+            "running": control.running,
+            "homing": control.homing_enabled,
+            "wcs": model.modal.wcs,
+            "wcs_list": list(WCS_WORDS),
+            "offsets": offsets,
+            "wco": _finite(model.wco_mm),
+            "overrides": {"feed": feed, "rapid": rapid, "spindle": spindle},
+            "modal": " ".join(model.modal.words),
+            "steps_per_mm": list(model.settings.steps_per_mm),
+        }
 
     # ------------------------------------------------------------------ the snapshot
     def view(self) -> Mapping[str, object]:
@@ -110,4 +174,5 @@ class SessionBackend:
             "max_rate_mm_min": list(limits.max_rate_mm_min),
             "speed_ratios": dict(self._ratios),
             "moving": session.busy() or (v.state not in (None, "Idle", "Alarm", "Sleep")),
+            "control": self._control_view(),
         }
