@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from smoothjog.control import CommandResult, ControlRefused
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent
 
 AXES = ("X", "Y", "Z")
@@ -52,6 +53,19 @@ def default_view() -> dict[str, object]:
         "max_rate_mm_min": [3000.0, 3000.0, 1000.0],
         "speed_ratios": {"X": 1.0, "Y": 1.0, "Z": 0.25},
         "moving": False,
+        "control": {
+            "can_command": True,
+            "reason": None,
+            "running": None,
+            "homing": True,
+            "wcs": "G54",
+            "wcs_list": ["G54", "G55", "G56", "G57", "G58", "G59"],
+            "offsets": {"G54": [-200.0, -140.0, -15.0]},
+            "wco": [-200.0, -140.0, -15.0],
+            "overrides": {"feed": 100, "rapid": 100, "spindle": 100},
+            "modal": "G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0",
+            "steps_per_mm": [80.0, 80.0, 400.0],
+        },
     }
 
 
@@ -68,6 +82,9 @@ class RecordingBackend:
         self._held: tuple[dict[str, float], float] | None = None
         self._last_view_s: float | None = None
         self._scripted_state: object = None
+        #: What `command` answers per command name (a plain ok when absent).
+        self.command_results: dict[str, CommandResult] = {}
+        self.refuse_commands: str | None = None
 
     @staticmethod
     def now_s() -> float:
@@ -121,6 +138,25 @@ class RecordingBackend:
         """Record the ratios and show them in the view."""
         self._record("set_speed_ratios", dict(ratios))
         self.view_state["speed_ratios"] = {**self.ratios(), **ratios}
+
+    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+        """Record a machine command; answer with `command_results[name]` or a plain ok.
+
+        `refuse_commands` (a reason) refuses every command in words, as the real one does while
+        the machine moves.
+        """
+        self._record("command", name, dict(args))
+        if self.refuse_commands is not None:
+            raise ControlRefused(self.refuse_commands)
+        return self.command_results.get(name, CommandResult(name, True))
+
+    def work_zero_targets(self) -> list[dict[str, float]]:
+        """Z to -1, then X and Y, then Z to the scripted WCO."""
+        control = self.view_state["control"]
+        assert isinstance(control, dict)
+        wco = control["wco"]
+        assert isinstance(wco, list)
+        return [{"Z": -1.0}, {"X": float(wco[0]), "Y": float(wco[1])}, {"Z": float(wco[2])}]
 
     # -- helpers for tests ---------------------------------------------------------------------
 

@@ -359,7 +359,7 @@ async def test_a_watcher_cannot_jog_until_it_takes_control(
     second = await open_page(p.url)
     await second.wait_for_selector("#role:has-text('watching')")
     assert await second.is_visible("#take-control")
-    assert "another pendant is in control" in await second.inner_text("#reason")
+    assert "another pendant is in control" in await second.inner_text("#status-text")
     assert await second.is_disabled("[aria-label='Step X plus']")
     await second.keyboard.down("ArrowRight")
     await quiet(backend, "jog_continuous", 0.0)
@@ -386,9 +386,10 @@ async def test_can_jog_false_disables_the_controls_and_shows_the_reason(
         fault={"text": "ALARM:1 Hard limit triggered", "hint": "Move off the switch, then $X."},
     )
     await backend.wait_for(lambda: backend.named("stop", t_s), what="the page's stop")
-    await page.wait_for_selector("#reason:has-text('hard limit hit')")
-    assert await page.inner_text("#fault-text") == "ALARM:1 Hard limit triggered"
-    assert "Move off the switch" in await page.inner_text("#fault-hint")
+    # A fault outranks the reason on the one status line, its hint beside it.
+    await page.wait_for_selector("#status-text:has-text('ALARM:1 Hard limit triggered')")
+    assert "Move off the switch" in await page.inner_text("#status-text")
+    assert await page.is_visible("#alarm-unlock")
     assert await page.inner_text("#state") == "Alarm"
     assert await page.is_disabled("[aria-label='Step X plus']")
     assert await page.get_attribute("#stick-xy", "aria-disabled") == "true"

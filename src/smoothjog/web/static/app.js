@@ -3,6 +3,7 @@
 import { Connection } from "./conn.js";
 import { SpeedPlot, TopView } from "./draw.js";
 import { GamepadJog } from "./gamepad.js";
+import { LANGUAGES, applyStrings, language, pickLanguage, setLanguage, t, translateServer } from "./i18n.js";
 import { DEFAULT_KEYS, KEY_ACTIONS, KeyJog } from "./keys.js";
 import { JogMixer } from "./mixer.js";
 import { loadSettings, saveSettings } from "./settings.js";
@@ -13,6 +14,10 @@ const MM_PER_INCH = 25.4;
 const STEP_SIZES = { mm: [0.01, 0.1, 1, 10], inch: [0.001, 0.01, 0.1, 1] };
 const SPEED_PRESETS = [1, 2, 5, 10, 25, 50, 75, 100];
 const CONTROLLER_FLAG = "smoothjog.pendant.controller";
+const CONSOLE_HISTORY = 50;
+const CONSOLE_LOG_LINES = 200;
+const FEED_STEPS = ["-10", "-1", "reset", "+1", "+10"];
+const RAPID_STEPS = ["25", "50", "100"];
 
 const settings = loadSettings();
 let view = null;
@@ -24,6 +29,12 @@ let units = "mm";
 let droAxes = "";
 let stepUnits = "";
 let noticeTimer = null;
+let commandId = 0;
+let zeroAxes = "";
+let wcsList = "";
+const pending = new Map();
+const history = [];
+let historyAt = 0;
 
 const conn = new Connection({ onMessage, onOpen, onClose });
 const mixer = new JogMixer((m) => conn.send(m));
@@ -44,11 +55,20 @@ const gamepad = new GamepadJog({
   settings: () => settings,
   onChange: (c) => mixer.set("pad", c),
   onSpeedStep: (dir) => stepSpeed(dir),
-  onStatus: (text) => {
-    $("gamepad-status").textContent = text;
+  onStatus: (id) => {
+    gamepadId = id;
+    showGamepad();
   },
 });
+let gamepadId = null;
+function showGamepad() {
+  $("gamepad-status").textContent = gamepadId ? t("gamepad.some", { id: gamepadId }) : t("gamepad.none");
+}
 const topView = new TopView($("topview"));
+topView.gridLabel = (len) => t("top.grid", { len });
+topView.onFollowChange = (on) => {
+  $("follow").checked = on;
+};
 const plot = new SpeedPlot($("plot"));
 
 mixer.onActivity = (on) => {
@@ -85,7 +105,8 @@ document.addEventListener("visibilitychange", () => {
 function onOpen() {
   connected = true;
   const pill = $("conn");
-  pill.textContent = "connected";
+  pill.dataset.i18n = "conn.up";
+  pill.textContent = t("conn.up");
   pill.className = "pill conn-up";
   refresh();
 }
@@ -94,8 +115,13 @@ function onClose() {
   connected = false;
   role = null;
   const pill = $("conn");
-  pill.textContent = "reconnecting";
+  pill.dataset.i18n = "conn.down";
+  pill.textContent = t("conn.down");
   pill.className = "pill conn-down";
+  for (const [id, entry] of pending) {
+    logConsole(entry.text, "err", t("result.failed", { command: entry.text, error: t("reason.offline") }));
+    pending.delete(id);
+  }
   refresh();
 }
 
@@ -107,7 +133,9 @@ function onMessage(msg) {
   } else if (msg.type === "role") {
     onRole(msg);
   } else if (msg.type === "error") {
-    showNotice(String(msg.text));
+    showNotice(translateServer(String(msg.text)));
+  } else if (msg.type === "result") {
+    onResult(msg);
   }
 }
 
@@ -126,7 +154,8 @@ function onRole(msg) {
     conn.send({ type: "take_control" });
   }
   const pill = $("role");
-  pill.textContent = role === "controller" ? "in control" : "watching";
+  pill.dataset.i18n = role === "controller" ? "role.controller" : "role.watcher";
+  pill.textContent = t(pill.dataset.i18n);
   $("take-control").hidden = role === "controller";
   refresh();
 }
@@ -155,19 +184,46 @@ function refresh() {
     document.body.classList.toggle("jog-disabled", !allowed);
   }
   $("stop").disabled = !isController;
-  let reason = "";
-  if (!connected) reason = "Not connected to smoothjog; reconnecting…";
-  else if (role === "watcher") {
-    reason = controlled
-      ? "Watching only: another pendant is in control."
-      : "Watching only: nobody is in control. Press Take control to jog.";
-  } else if (view === null) reason = "Waiting for the machine…";
-  else if (view.can_jog !== true) {
-    reason = view.reason ? String(view.reason) : `Jogging is disabled while the machine is in ${view.state}.`;
+  document.body.classList.toggle("watcher", connected && role === "watcher");
+  const control = view?.control ?? null;
+  const mayCommand = isController && control !== null && control.can_command === true;
+  for (const el of document.querySelectorAll("[data-cmd]")) el.disabled = !mayCommand;
+  if (control) {
+    $("m-home").disabled = !mayCommand || control.homing !== true;
+    $("alarm-home").hidden = control.homing !== true;
   }
-  const el = $("reason");
-  el.textContent = reason;
-  el.hidden = reason === "";
+  for (const id of ["alarm-home", "alarm-unlock"]) $(id).disabled = !mayCommand;
+  for (const el of document.querySelectorAll("#speed, .ratio, #inertial, #step-sizes button")) {
+    el.disabled = !isController;
+  }
+
+  let text = "";
+  let kind = "ok";
+  if (!connected) {
+    text = t("reason.offline");
+    kind = "warn";
+  } else if (role === "watcher") {
+    text = controlled ? t("reason.watch.other") : t("reason.watch.nobody");
+    kind = "warn";
+  } else if (view === null) {
+    text = t("reason.waiting");
+    kind = "warn";
+  } else if (view.fault) {
+    const hint = view.fault.hint ? ` ${translateServer(String(view.fault.hint))}` : "";
+    text = translateServer(String(view.fault.text ?? "")) + hint;
+    kind = "bad";
+  } else if (view.can_jog !== true) {
+    text = view.reason ? translateServer(String(view.reason)) : t("reason.state", { state: view.state });
+    kind = "warn";
+  } else {
+    text = t("status.ready");
+  }
+  const status = $("status");
+  status.className = `status status-${kind}`;
+  $("status-text").textContent = text;
+  status.title = text;
+  // In Alarm the way out is offered right where the message is.
+  $("status-actions").hidden = !(connected && view !== null && view.state === "Alarm");
 }
 
 // -- rendering --------------------------------------------------------------------------------
@@ -183,6 +239,7 @@ function fmtLenUnit(mm) {
 
 function render() {
   units = view.units === "inch" ? "inch" : "mm";
+  renderControl(view.control);
   const axes = Array.isArray(view.axes) ? view.axes.map(String) : ["X", "Y", "Z"];
   mixer.axes = axes;
 
@@ -201,9 +258,9 @@ function render() {
       const tr = document.createElement("tr");
       tr.innerHTML = `<td class="ax"></td><td class="w"></td><td class="m"></td><td class="sp"></td>`;
       tr.children[0].textContent = a;
-      tr.children[1].setAttribute("aria-label", `${a} work position`);
-      tr.children[2].setAttribute("aria-label", `${a} machine position`);
-      tr.children[3].setAttribute("aria-label", `${a} predicted stop point`);
+      tr.children[1].setAttribute("aria-label", t("dro.work.aria", { axis: a }));
+      tr.children[2].setAttribute("aria-label", t("dro.machine.aria", { axis: a }));
+      tr.children[3].setAttribute("aria-label", t("dro.stop.aria", { axis: a }));
       body.append(tr);
     }
   }
@@ -217,21 +274,13 @@ function render() {
 
   const perMin = units === "inch" ? "in/min" : "mm/min";
   const scale = units === "inch" ? 60 / MM_PER_INCH : 60;
-  $("units").textContent = units === "inch" ? "inch" : "mm";
   for (const u of document.querySelectorAll(".dro .u")) u.textContent = units === "inch" ? "in" : "mm";
   $("feed").textContent = Number.isFinite(view.feed_mm_min)
     ? `${Math.round((view.feed_mm_min / 60) * scale)} ${perMin}`
     : "—";
   const q = view.queue;
-  $("queue").textContent = q ? `${q.blocks ?? 0} blk, ${fmtLenUnit(q.queued_mm ?? 0)}` : "—";
+  $("queue").textContent = q ? t("meta.queue.value", { blocks: q.blocks ?? 0, len: fmtLenUnit(q.queued_mm ?? 0) }) : "—";
   $("firmware").textContent = String(view.firmware ?? "");
-
-  const fault = view.fault;
-  $("fault").hidden = !fault;
-  if (fault) {
-    $("fault-text").textContent = String(fault.text ?? "");
-    $("fault-hint").textContent = fault.hint ? String(fault.hint) : "";
-  }
 
   if (view.speed_ratios) {
     for (const a of ["X", "Y", "Z"]) {
@@ -240,11 +289,18 @@ function render() {
       if (input && document.activeElement !== input && Number.isFinite(v)) input.value = String(v);
     }
   }
-  if (units !== stepUnits) buildStepSizes();
+  const stepKey = `${units}|${settings.stepIndex}|${JSON.stringify(view.control?.steps_per_mm ?? null)}`;
+  if (stepKey !== stepNoteFor) buildStepSizes();
 
-  topView.draw(view, fmtLenUnit);
-  plot.add(view.t_s, view.commanded_speed_mm_s, view.actual_speed_mm_s);
-  plot.draw(scale, perMin);
+  topView.draw(view, fmtLenUnit, units === "inch" ? MM_PER_INCH : 1);
+  // Reported speed is the controller's own FS feed, not a difference of positions (which jumps
+  // with the report's timing); commanded is the jog's speed after the machine's caps.
+  const moving = view.moving === true;
+  const reported = Number.isFinite(view.feed_mm_min) ? view.feed_mm_min / 60 : null;
+  plot.add(view.t_s, moving ? view.commanded_speed_mm_s : 0, moving ? reported : 0);
+  const rates = Array.isArray(view.max_rate_mm_min) ? view.max_rate_mm_min.filter(Number.isFinite) : [];
+  const topMmS = rates.length ? Math.max(...rates) / 60 : null;
+  plot.draw(scale, perMin, topMmS, (unit, s) => t("plot.window", { unit, s }));
 }
 
 // -- controls ---------------------------------------------------------------------------------
@@ -263,6 +319,8 @@ function stepSpeed(dir) {
   if (next !== undefined) setSpeedPercent(next);
 }
 
+let stepNoteFor = "";
+
 function buildStepSizes() {
   stepUnits = units;
   const box = $("step-sizes");
@@ -273,8 +331,9 @@ function buildStepSizes() {
     b.setAttribute("role", "radio");
     b.setAttribute("aria-checked", String(i === settings.stepIndex));
     const label = units === "inch" ? `${size} in` : `${size} mm`;
-    b.setAttribute("aria-label", `Step size ${label}`);
+    b.setAttribute("aria-label", t("steps.size.item", { size: label }));
     b.textContent = String(size);
+    b.disabled = !(connected && role === "controller");
     b.addEventListener("click", () => {
       settings.stepIndex = i;
       saveSettings(settings);
@@ -284,6 +343,27 @@ function buildStepSizes() {
   });
   const size = STEP_SIZES[units][settings.stepIndex];
   $("step-size-out").textContent = units === "inch" ? `${size} in` : `${size} mm`;
+  for (const b of document.querySelectorAll("button.step")) {
+    const sign = Number(b.dataset.sign) > 0 ? t("sign.plus") : t("sign.minus");
+    b.setAttribute("aria-label", t("step.aria", { axis: b.dataset.axis, sign }));
+  }
+  // Say when the machine's resolution rounds the step (0.01 mm at 80 steps/mm moves 0.0125).
+  const spm = view?.control?.steps_per_mm;
+  const axes = Array.isArray(view?.axes) ? view.axes : [];
+  const sizeMm = units === "inch" ? size * MM_PER_INCH : size;
+  const notes = [];
+  if (Array.isArray(spm)) {
+    axes.forEach((a, i) => {
+      const perMm = Number(spm[i]);
+      if (!(perMm > 0)) return;
+      const moved = Math.max(1, Math.round(sizeMm * perMm)) / perMm;
+      if (Math.abs(moved - sizeMm) > 1e-9) {
+        notes.push(`${a}: ${t("steps.rounded", { size: fmtLenUnit(moved), res: fmtLenUnit(1 / perMm) })}`);
+      }
+    });
+  }
+  $("step-note").textContent = notes.join(" · ");
+  stepNoteFor = `${units}|${settings.stepIndex}|${JSON.stringify(spm ?? null)}`;
 }
 
 for (const b of document.querySelectorAll("button.step")) {
@@ -294,6 +374,14 @@ for (const b of document.querySelectorAll("button.step")) {
     conn.send({ type: "step", axis: b.dataset.axis, dist_mm: Math.round(distMm * 1e4) / 1e4 });
   });
 }
+
+$("zoom-in").addEventListener("click", () => topView.setZoom(topView.zoom * 2));
+$("zoom-out").addEventListener("click", () => topView.setZoom(topView.zoom / 2));
+$("zoom-fit").addEventListener("click", () => topView.setZoom(1));
+$("follow").addEventListener("change", (e) => {
+  topView.follow = e.target.checked;
+  topView.redraw();
+});
 
 $("stop").addEventListener("click", stopAll);
 $("take-control").addEventListener("click", () => conn.send({ type: "take_control" }));
@@ -310,7 +398,10 @@ for (const a of ["X", "Y", "Z"]) {
     for (const b of ["X", "Y", "Z"]) {
       const v = Number($(`ratio-${b}`).value);
       if (!(v > 0 && v <= 1)) {
-        showNotice(`Speed ratio ${b} must be above 0 and at most 1.`);
+        showNotice(t("ratio.bad", { axis: b }));
+        // The server keeps the old value: show it again rather than the refused one.
+        const kept = view?.speed_ratios?.[b];
+        if (Number.isFinite(kept)) $(`ratio-${b}`).value = String(kept);
         return;
       }
       ratios[b] = v;
@@ -318,6 +409,179 @@ for (const a of ["X", "Y", "Z"]) {
     conn.send({ type: "ratios", ratios });
   });
 }
+
+// -- machine control --------------------------------------------------------------------------
+
+/** Send a machine command; its result comes back as a "result" message with the same id. */
+function command(name, args = {}, label = name) {
+  commandId += 1;
+  pending.set(commandId, { text: label });
+  if (!conn.send({ type: "command", name, id: commandId, ...args })) {
+    pending.delete(commandId);
+    showNotice(t("reason.offline"));
+    return;
+  }
+  logConsole(label, "sent");
+}
+
+function onResult(msg) {
+  const entry = pending.get(msg.id);
+  pending.delete(msg.id);
+  for (const line of msg.lines || []) logConsole(String(line), "out");
+  if (msg.ok) {
+    logConsole(t("console.ok"), "ok");
+  } else {
+    const what = entry ? entry.text : String(msg.command);
+    const error = translateServer(String(msg.error ?? ""));
+    logConsole(error, "err");
+    showNotice(t("result.failed", { command: what, error }));
+  }
+}
+
+function logConsole(text, kind) {
+  const log = $("console-log");
+  const li = document.createElement("li");
+  li.className = `c-${kind}`;
+  li.textContent = kind === "sent" ? `> ${text}` : text;
+  log.append(li);
+  while (log.children.length > CONSOLE_LOG_LINES) log.firstElementChild.remove();
+  log.scrollTop = log.scrollHeight;
+}
+
+function renderControl(control) {
+  if (!control) return;
+  const axes = Array.isArray(view.axes) ? view.axes.map(String) : ["X", "Y", "Z"];
+  if (axes.join() !== zeroAxes) {
+    zeroAxes = axes.join();
+    const row = $("zero-row");
+    row.replaceChildren();
+    for (const a of axes) {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.dataset.cmd = "";
+      b.dataset.i18nDyn = "zero";
+      b.dataset.axis = a;
+      b.addEventListener("click", () => command("zero", { axes: [a] }, t("machine.zero", { axis: a })));
+      row.append(b);
+    }
+    const all = document.createElement("button");
+    all.type = "button";
+    all.dataset.cmd = "";
+    all.dataset.i18n = "machine.zero.all";
+    all.dataset.i18nAria = "machine.zero.all.aria";
+    all.addEventListener("click", () => command("zero", { axes }, t("machine.zero.all")));
+    row.append(all);
+    const go = document.createElement("button");
+    go.type = "button";
+    go.dataset.cmd = "";
+    go.dataset.i18n = "machine.goto";
+    go.dataset.i18nAria = "machine.goto.aria";
+    go.addEventListener("click", () => command("goto_zero", {}, t("machine.goto")));
+    row.append(go);
+    labelDynamic();
+  }
+  const list = Array.isArray(control.wcs_list) ? control.wcs_list.map(String) : [];
+  if (list.join() !== wcsList) {
+    wcsList = list.join();
+    const select = $("wcs");
+    select.replaceChildren(...list.map((w) => new Option(w, w)));
+  }
+  const wcs = String(control.wcs ?? "");
+  if (document.activeElement !== $("wcs")) $("wcs").value = wcs;
+  $("wcs-now").textContent = wcs;
+  const offset = control.offsets?.[wcs];
+  $("wcs-offset").textContent = Array.isArray(offset)
+    ? t("machine.offset", { values: offset.map((v) => fmtLen(Number(v))).join(", ") })
+    : "";
+  $("modal").textContent = control.modal ? String(control.modal) : "—";
+  const ov = control.overrides ?? {};
+  $("ov-feed").textContent = `${ov.feed ?? 100} %`;
+  $("ov-rapid").textContent = `${ov.rapid ?? 100} %`;
+  $("m-running").textContent = control.running ? t("machine.running", { what: translateServer(String(control.running)) }) : "";
+}
+
+/** Labels built from data (axis names): filled again when the language changes. */
+function labelDynamic() {
+  for (const b of document.querySelectorAll("[data-i18n-dyn=zero]")) {
+    b.textContent = t("machine.zero", { axis: b.dataset.axis });
+    b.setAttribute("aria-label", t("machine.zero.aria", { axis: b.dataset.axis }));
+  }
+  for (const b of document.querySelectorAll("[data-ov]")) {
+    const kind = t(`machine.ov.${b.dataset.ov}`);
+    const step = b.dataset.step === "reset" ? "100 %" : `${b.dataset.step} %`;
+    b.textContent = b.dataset.step === "reset" ? "100 %" : b.dataset.step;
+    b.setAttribute("aria-label", t("machine.ov.aria", { kind, step }));
+  }
+  for (const a of ["X", "Y", "Z"]) $(`ratio-${a}`).setAttribute("aria-label", t("ratio.aria", { axis: a }));
+  applyStrings($("zero-row"));
+}
+
+function buildOverrides() {
+  for (const [kind, steps] of [["feed", FEED_STEPS], ["rapid", RAPID_STEPS]]) {
+    const box = $(`ov-${kind}-buttons`);
+    box.replaceChildren();
+    for (const step of steps) {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.className = "tool";
+      b.dataset.cmd = "";
+      b.dataset.ov = kind;
+      b.dataset.step = step;
+      b.addEventListener("click", () => command("override", { kind, step }, `${t(`machine.ov.${kind}`)} ${step}`));
+      box.append(b);
+    }
+  }
+}
+
+$("m-home").addEventListener("click", () => command("home", {}, "$H"));
+$("alarm-home").addEventListener("click", () => command("home", {}, "$H"));
+for (const id of ["m-unlock", "alarm-unlock"]) {
+  $(id).addEventListener("click", () => {
+    showNotice(t("machine.unlock.warn"));
+    command("unlock", {}, "$X");
+  });
+}
+$("m-reset").addEventListener("click", () => command("reset", {}, "Ctrl-X"));
+$("wcs").addEventListener("change", (e) => command("wcs", { wcs: e.target.value }, e.target.value));
+
+$("console-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  const input = $("console-input");
+  const line = input.value.trim();
+  if (!line) return;
+  if (history[history.length - 1] !== line) history.push(line);
+  while (history.length > CONSOLE_HISTORY) history.shift();
+  historyAt = history.length;
+  input.value = "";
+  command("console", { line }, line);
+});
+$("console-input").addEventListener("keydown", (e) => {
+  if (e.key !== "ArrowUp" && e.key !== "ArrowDown") return;
+  e.preventDefault();
+  historyAt = Math.max(0, Math.min(history.length, historyAt + (e.key === "ArrowUp" ? -1 : 1)));
+  e.target.value = history[historyAt] ?? "";
+});
+
+// -- language ---------------------------------------------------------------------------------
+
+function applyLanguage(l) {
+  setLanguage(l);
+  applyStrings();
+  labelDynamic();
+  buildKeyBindings();
+  buildStepSizes();
+  showGamepad();
+  droAxes = "";
+  if (view !== null) render();
+  refresh();
+}
+
+for (const [code, name] of Object.entries(LANGUAGES)) $("lang").append(new Option(name, code));
+$("lang").addEventListener("change", (e) => {
+  settings.language = e.target.value;
+  saveSettings(settings);
+  applyLanguage(e.target.value);
+});
 
 // -- settings panel ---------------------------------------------------------------------------
 
@@ -328,10 +592,10 @@ function buildKeyBindings() {
     const b = document.createElement("button");
     b.type = "button";
     const code = settings.keys[action];
-    b.textContent = `${action}: ${code}`;
-    b.setAttribute("aria-label", `Key for ${action.replace("+", " plus").replace("-", " minus")}: ${code}. Press to change.`);
+    b.textContent = t("settings.key", { action, code });
+    b.setAttribute("aria-label", t("settings.key.aria", { action, code }));
     b.addEventListener("click", () => {
-      b.textContent = `${action}: press a key…`;
+      b.textContent = t("settings.key.listen", { action });
       b.classList.add("listening");
       keys.captureNext((newCode) => {
         if (newCode) settings.keys[action] = newCode;
@@ -359,7 +623,7 @@ function bindNumber(id, key, lo, hi) {
       saveSettings(settings);
     } else {
       input.value = String(settings[key]);
-      showNotice(`${id.replace("set-", "")} must be between ${lo} and ${hi}.`);
+      showNotice(t("settings.range", { name: id.replace("set-", ""), lo, hi }));
     }
   });
 }
@@ -373,8 +637,10 @@ $("set-gp-deadman").addEventListener("change", (e) => {
   saveSettings(settings);
 });
 
-buildKeyBindings();
-buildStepSizes();
+buildOverrides();
+setLanguage(pickLanguage(settings.language));
+$("lang").value = language();
+applyLanguage(language());
 setSpeedPercent(settings.speedPercent);
 for (const s of sticks) s.setDisabled(true);
 for (const b of document.querySelectorAll("[data-jog]")) b.disabled = true;

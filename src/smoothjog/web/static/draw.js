@@ -45,9 +45,57 @@ function niceCeil(v) {
 export class TopView {
   constructor(canvas) {
     this.canvas = canvas;
+    this.zoom = 1; // 1 = the whole work area
+    this.follow = true; // when zoomed, keep the machine in the middle
+    this.center = null; // the middle of the drawing in mm when zoomed and not following
+    this.last = null;
+    this.scale = 1;
+    let drag = null;
+    canvas.addEventListener("pointerdown", (e) => {
+      if (this.zoom <= 1) return;
+      drag = { x: e.clientX, y: e.clientY };
+      canvas.setPointerCapture(e.pointerId);
+    });
+    canvas.addEventListener("pointermove", (e) => {
+      if (!drag || !this.center) return;
+      // Dragging pans the drawing (and stops following the machine).
+      this.follow = false;
+      this.onFollowChange?.(false);
+      this.center = [
+        this.center[0] - (e.clientX - drag.x) / this.scale,
+        this.center[1] + (e.clientY - drag.y) / this.scale,
+      ];
+      drag = { x: e.clientX, y: e.clientY };
+      this.redraw();
+    });
+    const end = () => {
+      drag = null;
+    };
+    canvas.addEventListener("pointerup", end);
+    canvas.addEventListener("pointercancel", end);
+    canvas.addEventListener(
+      "wheel",
+      (e) => {
+        e.preventDefault();
+        this.setZoom(this.zoom * (e.deltaY < 0 ? 1.5 : 1 / 1.5));
+      },
+      { passive: false },
+    );
   }
 
-  draw(view, fmtLen) {
+  setZoom(z) {
+    this.zoom = Math.min(64, Math.max(1, z));
+    if (this.zoom === 1) this.center = null;
+    this.redraw();
+  }
+
+  redraw() {
+    if (this.last) this.draw(...this.last);
+  }
+
+  /** fmtLen formats mm in the display unit; unitMm is that unit in mm (1 or 25.4). */
+  draw(view, fmtLen, unitMm = 1) {
+    this.last = [view, fmtLen, unitMm];
     const { ctx, w, h } = fit(this.canvas);
     if (!view || !Array.isArray(view.mpos) || view.mpos.length < 2) return;
     const pos = view.mpos;
@@ -70,24 +118,34 @@ export class TopView {
       }
     }
     const pad = 18;
-    const scale = Math.min((w - 2 * pad) / Math.max(x1 - x0, 1e-6), (h - 2 * pad) / Math.max(y1 - y0, 1e-6));
-    // Centre the drawing; one scale for both axes keeps it true to shape.
-    const ox = (w - (x1 - x0) * scale) / 2;
-    const oy = (h - (y1 - y0) * scale) / 2;
-    const sx = (x) => ox + (x - x0) * scale;
-    const sy = (y) => h - oy - (y - y0) * scale;
+    const fitScale = Math.min((w - 2 * pad) / Math.max(x1 - x0, 1e-6), (h - 2 * pad) / Math.max(y1 - y0, 1e-6));
+    const scale = fitScale * this.zoom;
+    this.scale = scale;
+    // One scale for both axes keeps the drawing true to shape. Whole: the work area centred;
+    // zoomed: the machine in the middle (follow) or wherever the user panned to.
+    if (this.zoom > 1 && (this.follow || !this.center)) this.center = [pos[0], pos[1]];
+    const cx = this.zoom > 1 ? this.center[0] : (x0 + x1) / 2;
+    const cy = this.zoom > 1 ? this.center[1] : (y0 + y1) / 2;
+    const sx = (x) => w / 2 + (x - cx) * scale;
+    const sy = (y) => h / 2 - (y - cy) * scale;
+    // The visible box in mm, for the grid.
+    const vx0 = Math.max(x0, cx - w / 2 / scale);
+    const vx1 = Math.min(x1, cx + w / 2 / scale);
+    const vy0 = Math.max(y0, cy - h / 2 / scale);
+    const vy1 = Math.min(y1, cy + h / 2 / scale);
 
-    const step = niceStep(Math.max(x1 - x0, y1 - y0), 6);
+    // Grid lines at round numbers of the display unit (10 mm, or 0.5 in), not of mm.
+    const step = niceStep(Math.max(vx1 - vx0, vy1 - vy0) / unitMm, 6) * unitMm;
     ctx.strokeStyle = COLORS.grid;
     ctx.lineWidth = 1;
     ctx.beginPath();
-    for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) {
-      ctx.moveTo(sx(x), sy(y0));
-      ctx.lineTo(sx(x), sy(y1));
+    for (let x = Math.ceil(vx0 / step) * step; x <= vx1; x += step) {
+      ctx.moveTo(sx(x), sy(vy0));
+      ctx.lineTo(sx(x), sy(vy1));
     }
-    for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) {
-      ctx.moveTo(sx(x0), sy(y));
-      ctx.lineTo(sx(x1), sy(y));
+    for (let y = Math.ceil(vy0 / step) * step; y <= vy1; y += step) {
+      ctx.moveTo(sx(vx0), sy(y));
+      ctx.lineTo(sx(vx1), sy(y));
     }
     ctx.stroke();
 
@@ -141,7 +199,7 @@ export class TopView {
 
     ctx.fillStyle = COLORS.text;
     ctx.font = "11px system-ui, sans-serif";
-    ctx.fillText(`grid ${fmtLen(step)}`, 4, h - 4);
+    ctx.fillText(this.gridLabel ? this.gridLabel(fmtLen(step)) : fmtLen(step), 4, h - 4);
     ctx.fillText("X →  Y ↑", w - 58, h - 4);
   }
 }
@@ -154,25 +212,29 @@ export class SpeedPlot {
     this.samples = [];
   }
 
+  /** One sample; null speeds are gaps (nothing known), drawn as gaps rather than ramps. */
   add(tS, commanded, actual) {
     if (!Number.isFinite(tS)) return;
     const last = this.samples[this.samples.length - 1];
     if (last && tS < last[0]) this.samples = []; // the clock restarted (a new session)
-    this.samples.push([tS, commanded ?? 0, actual ?? 0]);
+    // The view is sent only while something changes: a long pause between samples is a gap.
+    if (last && tS - last[0] > 0.5) this.samples.push([tS, null, null]);
+    this.samples.push([tS, commanded, actual]);
     while (this.samples.length && tS - this.samples[0][0] > this.windowS + 1) this.samples.shift();
   }
 
-  /** unitScale converts mm/s to the unit shown; unitLabel names it. */
-  draw(unitScale, unitLabel) {
+  /** unitScale converts mm/s to the unit shown; unitLabel names it; topMmS is the axis top. */
+  draw(unitScale, unitLabel, topMmS, windowLabel) {
     const { ctx, w, h } = fit(this.canvas);
-    const left = 44;
+    const left = 48;
     const bottom = h - 16;
     const top = 6;
     const right = w - 6;
     const tEnd = this.samples.length ? this.samples[this.samples.length - 1][0] : 0;
-    let vmax = 1;
-    for (const [, c, a] of this.samples) vmax = Math.max(vmax, c * unitScale, a * unitScale);
-    vmax = niceCeil(vmax * 1.05);
+    // The scale comes from the machine's top speed, so a jog at full speed fills the plot.
+    let vmax = Number.isFinite(topMmS) && topMmS > 0 ? topMmS * unitScale : 1;
+    for (const [, c, a] of this.samples) vmax = Math.max(vmax, (c ?? 0) * unitScale, (a ?? 0) * unitScale);
+    vmax = niceCeil(vmax);
     const px = (t) => left + ((t - (tEnd - this.windowS)) / this.windowS) * (right - left);
     const py = (v) => bottom - (v / vmax) * (bottom - top);
 
@@ -181,14 +243,14 @@ export class SpeedPlot {
     ctx.font = "11px system-ui, sans-serif";
     ctx.lineWidth = 1;
     ctx.beginPath();
-    for (let i = 0; i <= 4; i++) {
-      const v = (vmax * i) / 4;
+    const tick = niceStep(vmax, 4);
+    for (let v = 0; v <= vmax + 1e-9; v += tick) {
       ctx.moveTo(left, py(v));
       ctx.lineTo(right, py(v));
-      ctx.fillText(String(Math.round(v * 10) / 10), 2, py(v) + 4);
+      ctx.fillText(String(+v.toPrecision(4)), 2, py(v) + 4);
     }
     ctx.stroke();
-    ctx.fillText(`${unitLabel} · last ${this.windowS} s`, left + 4, h - 3);
+    ctx.fillText(windowLabel ? windowLabel(unitLabel, this.windowS) : unitLabel, left + 4, h - 3);
 
     for (const [index, color, dash] of [
       [1, COLORS.cmd, [5, 3]],
@@ -201,6 +263,10 @@ export class SpeedPlot {
       let started = false;
       for (const s of this.samples) {
         if (s[0] < tEnd - this.windowS) continue;
+        if (s[index] === null || !Number.isFinite(s[index])) {
+          started = false; // a gap: lift the pen
+          continue;
+        }
         const x = px(s[0]);
         const y = py(s[index] * unitScale);
         if (started) ctx.lineTo(x, y);

@@ -48,14 +48,14 @@ export class GamepadJog {
     if (!pad) {
       if (this.padId !== null) {
         this.padId = null;
-        this.onStatus("No gamepad");
+        this.onStatus(null);
       }
       this._emit({ X: 0, Y: 0, Z: 0 });
       return;
     }
     if (pad.id !== this.padId) {
       this.padId = pad.id;
-      this.onStatus(`Gamepad: ${pad.id}`);
+      this.onStatus(pad.id);
     }
     const s = this.settings();
     const ax = pad.axes || [];

@@ -1,4 +1,4 @@
-// Pendant settings kept in this browser's localStorage (key bindings, stick shaping, gamepad).
+// Pendant settings kept in this browser's localStorage (keys, stick shaping, gamepad, language).
 
 import { DEFAULT_KEYS } from "./keys.js";
 
@@ -13,6 +13,7 @@ export const DEFAULTS = {
   speedPercent: 25,
   stepIndex: 2,
   inertial: false,
+  language: "",
 };
 
 function num(v, lo, hi, fallback) {
@@ -41,6 +42,7 @@ export function loadSettings() {
     speedPercent: num(raw.speedPercent, 1, 100, DEFAULTS.speedPercent),
     stepIndex: num(raw.stepIndex, 0, 3, DEFAULTS.stepIndex),
     inertial: Boolean(raw.inertial),
+    language: typeof raw.language === "string" ? raw.language : "",
   };
 }
 
