@@ -138,7 +138,7 @@ OpenPage = Callable[..., Awaitable[Any]]
 
 @pytest_asyncio.fixture(loop_scope="session")
 async def open_page(browser: Any) -> AsyncIterator[OpenPage]:
-    """Factory: `await open_page(url, viewport=PHONE, init_script=..., touch=False)`.
+    """Factory: `await open_page(url, viewport=PHONE, init_script=..., touch=False, locale=...)`.
 
     Each page gets its own browser context (own cookies and localStorage); page errors fail
     the test. Returns the Playwright page once the pendant has connected.
@@ -153,9 +153,10 @@ async def open_page(browser: Any) -> AsyncIterator[OpenPage]:
         init_script: str | None = None,
         touch: bool = False,
         wait_connected: bool = True,
+        locale: str = "en-US",
     ) -> Any:
         context = await browser.new_context(
-            viewport=viewport or DESKTOP, has_touch=touch, is_mobile=False
+            viewport=viewport or DESKTOP, has_touch=touch, is_mobile=False, locale=locale
         )
         contexts.append(context)
         if init_script:

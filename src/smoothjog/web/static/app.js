@@ -213,7 +213,8 @@ function refresh() {
     text = translateServer(String(view.fault.text ?? "")) + hint;
     kind = "bad";
   } else if (view.can_jog !== true) {
-    text = view.reason ? translateServer(String(view.reason)) : t("reason.state", { state: view.state });
+    const shownState = t(`st.${view.state}`);
+    text = view.reason ? translateServer(String(view.reason)) : t("reason.state", { state: shownState });
     kind = "warn";
   } else {
     text = t("status.ready");
@@ -245,9 +246,10 @@ function render() {
 
   const state = String(view.state ?? "?");
   const st = $("state");
+  const shown = t(`st.${state}`) === `st.${state}` ? state : t(`st.${state}`);
   st.textContent = view.substate !== null && view.substate !== undefined && view.substate !== ""
-    ? `${state}:${view.substate}`
-    : state;
+    ? `${shown}:${view.substate}`
+    : shown;
   st.className = `state s-${state.toLowerCase()}`;
 
   if (axes.join() !== droAxes) {
