@@ -15,6 +15,7 @@ from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
 from smoothjog.sim.rig import SimRig
 from smoothjog.virtual import VirtualHost
+from smoothjog.web.protocol import CommandMessage
 
 T = TypeVar("T")
 
@@ -96,7 +97,7 @@ def test_a_jog_is_refused_in_words_while_homing(alarmed: VirtualHost) -> None:
     answers: list[tuple[bool, str | None]] = []
 
     async def scenario() -> None:
-        task = vh.loop.create_task(backend.command("home", {}))
+        task = vh.loop.create_task(backend.command(CommandMessage("home", 1)))
         await asyncio.sleep(0.5)
         answers.append(backend.can_jog())
         await task

@@ -15,8 +15,9 @@ limits, after G-code the parser modes (`$G`) and offsets (`$#`), which the penda
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -230,11 +231,17 @@ class MachineControl:
         return moves
 
     # ----------------------------------------------------------------- internals
-    def _running(self, what: str) -> _Running:
+    @contextlib.asynccontextmanager
+    async def _running(self, what: str) -> AsyncIterator[None]:
+        """Mark a command as running for its whole length; refuse it when another may not."""
         reason = self.refusal()
         if reason is not None:
             raise ControlRefused(reason)
-        return _Running(self, what)
+        self.running = what
+        try:
+            yield
+        finally:
+            self.running = None
 
     async def _line(
         self, text: str, what: str, *, timeout_s: float = LINE_TIMEOUT_S, reread: bool = False
@@ -265,17 +272,3 @@ class MachineControl:
         except SmoothjogError:
             # The command itself succeeded; the page shows the last modes it knows.
             pass
-
-
-class _Running:
-    """`async with`: mark a command as running for its whole length, one at a time."""
-
-    def __init__(self, control: MachineControl, what: str) -> None:
-        self.control = control
-        self.what = what
-
-    async def __aenter__(self) -> None:
-        self.control.running = self.what
-
-    async def __aexit__(self, *exc: object) -> None:
-        self.control.running = None

@@ -7,6 +7,7 @@ same `pendant` and `open_page` fixtures with their own backend.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
@@ -44,6 +45,15 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if pytest_asyncio.is_async_test(item) and HERE in Path(str(item.path)).parents:
             item.add_marker(marker, append=False)
+
+
+async def poll_until(predicate: Callable[[], object], timeout_s: float, what: str) -> None:
+    """Check predicate every 20 ms on the loop until it holds; fail naming what never came."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout_s
+    while not predicate():
+        assert loop.time() < end, f"timed out waiting for {what}"
+        await asyncio.sleep(0.02)
 
 
 @dataclass

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from smoothjog.control import CommandResult, ControlRefused
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent
+from smoothjog.web.protocol import CommandMessage
 
 AXES = ("X", "Y", "Z")
 
@@ -139,16 +140,16 @@ class RecordingBackend:
         self._record("set_speed_ratios", dict(ratios))
         self.view_state["speed_ratios"] = {**self.ratios(), **ratios}
 
-    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+    async def command(self, message: CommandMessage) -> CommandResult:
         """Record a machine command; answer with `command_results[name]` or a plain ok.
 
         `refuse_commands` (a reason) refuses every command in words, as the real one does while
         the machine moves.
         """
-        self._record("command", name, dict(args))
+        self._record("command", message)
         if self.refuse_commands is not None:
             raise ControlRefused(self.refuse_commands)
-        return self.command_results.get(name, CommandResult(name, True))
+        return self.command_results.get(message.name, CommandResult(message.name, True))
 
     def work_zero_targets(self) -> list[dict[str, float]]:
         """Z to -1, then X and Y, then Z to the scripted WCO."""

@@ -22,7 +22,7 @@ from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.web.session_backend import SessionBackend
-from tests.web.conftest import DESKTOP, PHONE, OpenPage, StartPendant
+from tests.web.conftest import DESKTOP, PHONE, OpenPage, StartPendant, poll_until
 from tests.web.test_page import FAKE_GAMEPAD, center
 
 V_MAX_MM_S = 5000 / 60  # hobby router X/Y
@@ -65,11 +65,7 @@ class Machine:
 
     async def wait_until(self, predicate: Any, timeout_s: float = 5.0, what: str = "") -> None:
         """Poll a condition on the machine."""
-        loop = asyncio.get_running_loop()
-        end = loop.time() + timeout_s
-        while not predicate():
-            assert loop.time() < end, f"timed out waiting for {what}"
-            await asyncio.sleep(0.02)
+        await poll_until(predicate, timeout_s, what)
 
     async def wait_rest(self, timeout_s: float = 5.0) -> None:
         """Wait until the engine is idle and the machine stands still."""

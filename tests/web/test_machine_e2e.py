@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import pytest
@@ -22,7 +22,7 @@ from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import load_machine_profile
 from smoothjog.web.session_backend import SessionBackend
-from tests.web.conftest import DESKTOP, OpenPage, StartPendant
+from tests.web.conftest import DESKTOP, OpenPage, StartPendant, poll_until
 
 
 @dataclasses.dataclass
@@ -34,12 +34,10 @@ class PoweredUp:
     def mpos(self) -> tuple[float, ...]:
         return self.link.firmware.mpos_mm()
 
-    async def until(self, predicate: object, what: str, timeout_s: float = 10.0) -> None:
-        loop = asyncio.get_running_loop()
-        end = loop.time() + timeout_s
-        while not predicate():  # type: ignore[operator]
-            assert loop.time() < end, f"timed out waiting for {what}"
-            await asyncio.sleep(0.02)
+    async def until(
+        self, predicate: Callable[[], object], what: str, timeout_s: float = 10.0
+    ) -> None:
+        await poll_until(predicate, timeout_s, what)
 
 
 @pytest_asyncio.fixture(loop_scope="session")

@@ -13,6 +13,7 @@ from typing import Protocol, runtime_checkable
 
 from smoothjog.control import CommandResult
 from smoothjog.core.intents import Intent
+from smoothjog.web.protocol import CommandMessage
 
 #: The keys of the snapshot `PendantBackend.view()` returns; docs/pendant.md explains each one.
 VIEW_KEYS: frozenset[str] = frozenset(
@@ -89,7 +90,7 @@ class PendantBackend(Protocol):
         """Set the relative top speed of each axis, e.g. {"X": 1, "Y": 1, "Z": 0.25}."""
         ...
 
-    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+    async def command(self, message: CommandMessage) -> CommandResult:
         """Run one machine command (unlock, home, reset, zero, wcs, override, console).
 
         Raises ControlRefused in words when it cannot run now (the machine moves, another

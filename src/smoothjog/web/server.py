@@ -283,19 +283,11 @@ class PendantHub:
 
     async def _command(self, page: WebInput, message: CommandMessage) -> None:
         """Run one machine command and answer the page with its result, or why it cannot run."""
-        args = {
-            "axes": list(message.axes),
-            "wcs": message.wcs,
-            "kind": message.kind,
-            "step": message.step,
-            "line": message.line,
-        }
         try:
-            result = await self.backend.command(message.name, args)
-        except ControlRefused as exc:
-            reply = result_message(message.id, message.name, ok=False, lines=(), error=str(exc))
+            result = await self.backend.command(message)
         except SmoothjogError as exc:
-            log.warning("pendant command %s failed: %s", message.name, exc)
+            if not isinstance(exc, ControlRefused):
+                log.warning("pendant command %s failed: %s", message.name, exc)
             reply = result_message(message.id, message.name, ok=False, lines=(), error=str(exc))
         else:
             reply = result_message(

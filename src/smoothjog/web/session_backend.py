@@ -13,6 +13,7 @@ from smoothjog.control import WCS_WORDS, CommandResult, ControlRefused, MachineC
 from smoothjog.core.codes import describe_alarm
 from smoothjog.core.intents import Intent
 from smoothjog.host import Host
+from smoothjog.web.protocol import CommandMessage
 
 #: Why nothing may jog once the link is gone (the view's reason says the same).
 LINK_LOST = "the connection to the controller is lost"
@@ -69,9 +70,10 @@ class SessionBackend:
         self._ratios.update(ratios)
 
     # ------------------------------------------------------------------ machine control
-    async def command(self, name: str, args: Mapping[str, object]) -> CommandResult:
+    async def command(self, message: CommandMessage) -> CommandResult:
         """Run one machine command through the session's MachineControl."""
         control = self.control
+        name = message.name
         if name == "unlock":
             return await control.unlock()
         if name == "home":
@@ -79,14 +81,13 @@ class SessionBackend:
         if name == "reset":
             return await control.soft_reset()
         if name == "zero":
-            axes = args.get("axes", ())
-            return await control.set_work_zero([str(a) for a in axes])  # type: ignore[attr-defined]
+            return await control.set_work_zero(message.axes)
         if name == "wcs":
-            return await control.select_wcs(str(args.get("wcs", "")))
+            return await control.select_wcs(message.wcs)
         if name == "override":
-            return await control.override(str(args.get("kind", "")), str(args.get("step", "")))
+            return await control.override(message.kind, message.step)
         if name == "console":
-            return await control.console(str(args.get("line", "")))
+            return await control.console(message.line)
         raise ControlRefused(f"unknown command {name!r}")
 
     def work_zero_targets(self) -> list[dict[str, float]]:

@@ -458,28 +458,20 @@ function renderControl(control) {
     const row = $("zero-row");
     row.replaceChildren();
     for (const a of axes) {
-      const b = document.createElement("button");
-      b.type = "button";
-      b.dataset.cmd = "";
-      b.dataset.i18nDyn = "zero";
-      b.dataset.axis = a;
-      b.addEventListener("click", () => command("zero", { axes: [a] }, t("machine.zero", { axis: a })));
-      row.append(b);
+      row.append(
+        commandButton({ i18nDyn: "zero", axis: a }, () =>
+          command("zero", { axes: [a] }, t("machine.zero", { axis: a })),
+        ),
+      );
     }
-    const all = document.createElement("button");
-    all.type = "button";
-    all.dataset.cmd = "";
-    all.dataset.i18n = "machine.zero.all";
-    all.dataset.i18nAria = "machine.zero.all.aria";
-    all.addEventListener("click", () => command("zero", { axes }, t("machine.zero.all")));
-    row.append(all);
-    const go = document.createElement("button");
-    go.type = "button";
-    go.dataset.cmd = "";
-    go.dataset.i18n = "machine.goto";
-    go.dataset.i18nAria = "machine.goto.aria";
-    go.addEventListener("click", () => command("goto_zero", {}, t("machine.goto")));
-    row.append(go);
+    row.append(
+      commandButton({ i18n: "machine.zero.all", i18nAria: "machine.zero.all.aria" }, () =>
+        command("zero", { axes }, t("machine.zero.all")),
+      ),
+      commandButton({ i18n: "machine.goto", i18nAria: "machine.goto.aria" }, () =>
+        command("goto_zero", {}, t("machine.goto")),
+      ),
+    );
     labelDynamic();
   }
   const list = Array.isArray(control.wcs_list) ? control.wcs_list.map(String) : [];
@@ -500,6 +492,16 @@ function renderControl(control) {
   $("ov-feed").textContent = `${ov.feed ?? 100} %`;
   $("ov-rapid").textContent = `${ov.rapid ?? 100} %`;
   $("m-running").textContent = control.running ? t("machine.running", { what: translateServer(String(control.running)) }) : "";
+}
+
+/** A machine-command button (enabled only when commands may run); data becomes its data-*. */
+function commandButton(data, onClick) {
+  const b = document.createElement("button");
+  b.type = "button";
+  b.dataset.cmd = "";
+  Object.assign(b.dataset, data);
+  b.addEventListener("click", onClick);
+  return b;
 }
 
 /** Labels built from data (axis names): filled again when the language changes. */
@@ -523,13 +525,10 @@ function buildOverrides() {
     const box = $(`ov-${kind}-buttons`);
     box.replaceChildren();
     for (const step of steps) {
-      const b = document.createElement("button");
-      b.type = "button";
+      const b = commandButton({ ov: kind, step }, () =>
+        command("override", { kind, step }, `${t(`machine.ov.${kind}`)} ${step}`),
+      );
       b.className = "tool";
-      b.dataset.cmd = "";
-      b.dataset.ov = kind;
-      b.dataset.step = step;
-      b.addEventListener("click", () => command("override", { kind, step }, `${t(`machine.ov.${kind}`)} ${step}`));
       box.append(b);
     }
   }
