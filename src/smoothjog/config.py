@@ -85,7 +85,7 @@ class Config:
     source: Path | None = None
 
 
-class _Table:
+class Table:
     """One TOML table being read: typed getters with bounds, and a check for unread keys."""
 
     def __init__(self, data: Mapping[str, Any], section: str, source: str) -> None:
@@ -214,7 +214,7 @@ class _Table:
             )
 
 
-def _connection(table: _Table) -> ConnectionConfig:
+def _connection(table: Table) -> ConnectionConfig:
     """Read [connection]."""
     port = table.text("port", None)
     connect = table.text("connect", None)
@@ -231,7 +231,7 @@ def _connection(table: _Table) -> ConnectionConfig:
     return ConnectionConfig(port=port, baud=baud, connect=connect, timeout_s=timeout_s)
 
 
-def _jog(table: _Table) -> JogConfig:
+def _jog(table: Table) -> JogConfig:
     """Read [jog]."""
     ratios: dict[str, float] = {}
     raw_ratios = table.table("speed_ratios")
@@ -262,7 +262,7 @@ def _keepouts(value: Any, source: str) -> tuple[KeepOut, ...]:
         section = f"keepout #{index}"
         if not isinstance(item, dict):
             raise ConfigError(f"{source}: [{section}] is not a table: write it as [[keepout]]")
-        table = _Table(item, section, source)
+        table = Table(item, section, source)
         name = table.text("name", None)
         if name is None:
             raise table.error("name", 'is missing: give every zone a name, e.g. name = "vise"')
@@ -289,7 +289,7 @@ def _keepouts(value: Any, source: str) -> tuple[KeepOut, ...]:
     return tuple(zones)
 
 
-def _pendant(table: _Table) -> PendantConfig:
+def _pendant(table: Table) -> PendantConfig:
     """Read [pendant]."""
     host = table.text("host", "127.0.0.1")
     assert host is not None  # a default is given
@@ -299,7 +299,7 @@ def _pendant(table: _Table) -> PendantConfig:
     return PendantConfig(host=host, port=port, lan=lan)
 
 
-def _sim(table: _Table) -> SimConfig:
+def _sim(table: Table) -> SimConfig:
     """Read [sim]."""
     firmware = table.choice("firmware", "grbl", FIRMWARE_NAMES)
     machine = table.text("machine", "hobby-router")
@@ -326,8 +326,8 @@ def parse_config(text: str, source: str = "<config>") -> Config:
         if key != "keepout" and not isinstance(value, dict):
             raise ConfigError(f"{source}: {key} must be a section, written [{key}]")
 
-    def section(name: str) -> _Table:
-        return _Table(data.get(name, {}), name, source)
+    def section(name: str) -> Table:
+        return Table(data.get(name, {}), name, source)
 
     return Config(
         connection=_connection(section("connection")),
