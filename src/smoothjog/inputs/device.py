@@ -29,9 +29,10 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 from smoothjog.core.intents import Intent
+from smoothjog.core.options import Table
 
 # -- what a device produces ------------------------------------------------------------------
 
@@ -163,12 +164,13 @@ class Decoder(ABC):
     #: Which kernel interface it reads.
     transport: ClassVar[Literal["evdev", "hidraw"]]
 
-    def __init__(self, info: DeviceInfo, options: Mapping[str, Any], axes: Sequence[str]) -> None:
+    def __init__(self, info: DeviceInfo, options: Table, axes: Sequence[str]) -> None:
         """A decoder for the device `info`, on a machine with `axes` (e.g. ("X", "Y", "Z")).
 
-        `options` is the device's table from the config (already stripped of the keys that
-        chose the device); a subclass reads its own keys from it with config.Table and raises
-        ConfigError naming the key for a bad value or an unknown key.
+        `options` is the device's table from the config (the keys that chose the device are
+        already read); a subclass reads its own keys with its getters, which raise ConfigError
+        naming the file and key, and calls `options.finish()` last so an unknown key (a typo)
+        is refused too. `Table({}, "device", "<defaults>")` gives every default.
         """
         self.info = info
         self.axes = tuple(axes)
