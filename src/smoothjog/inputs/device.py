@@ -159,7 +159,10 @@ class DisplayView:
 class Decoder(ABC):
     """Turns what one device produces into actions; pure, with time given by the caller."""
 
-    #: The input kind (inputs/base.py KIND_NOUNS), e.g. "gamepad".
+    #: The device kind's own name, as `--input-kind` and the config's `kind` say it
+    #: ("gamepad", "keyboard", "knob", "shuttle", "spacemouse", "whb04b").
+    name: ClassVar[str]
+    #: The input kind (inputs/base.py KIND_NOUNS) for messages, e.g. "gamepad", "handwheel".
     kind: ClassVar[str]
     #: Which kernel interface it reads.
     transport: ClassVar[Literal["evdev", "hidraw"]]
@@ -174,6 +177,11 @@ class Decoder(ABC):
         """
         self.info = info
         self.axes = tuple(axes)
+
+    @classmethod
+    def matches(cls, info: DeviceInfo) -> bool:
+        """Whether this kind takes the device by default (by ids, name or capabilities)."""
+        return False
 
     @abstractmethod
     def feed(self, item: DeviceItem) -> list[Action]:
