@@ -179,7 +179,7 @@ def test_the_first_attached_controls_and_later_ones_watch(rig: Rig) -> None:
     assert rig.changes == ["pad"]
 
 
-@pytest.mark.parametrize("intent", [JOG, NEUTRAL, STEP, GOTO, STOP], ids=repr)
+@pytest.mark.parametrize("intent", [JOG, NEUTRAL, STEP, GOTO], ids=repr)
 def test_a_watcher_is_refused_every_intent_and_nothing_reaches_the_machine(
     rig: Rig, intent: Intent
 ) -> None:
@@ -189,6 +189,26 @@ def test_a_watcher_is_refused_every_intent_and_nothing_reaches_the_machine(
         page.submit(intent)
     assert rig.sink.intents == []
     assert rig.sink.can_jog_calls == 0
+
+
+def test_a_watchers_stop_stops_the_controllers_jog(rig: Rig) -> None:
+    # A STOP button on a device that only watches must still stop the machine.
+    _, pad = rig.attach("pad")
+    _, page = rig.attach("page", kind="web")
+    pad.submit(JOG)
+    page.submit(STOP)
+    assert rig.sink.intents == [JOG, STOP]
+    assert not rig.arbiter.holding
+    assert not rig.arbiter.lease_armed
+
+
+def test_a_detached_inputs_stop_is_refused(rig: Rig) -> None:
+    _, pad = rig.attach("pad")
+    _, page = rig.attach("page", kind="web")
+    page.detach()
+    with pytest.raises(InputRefused, match="detached"):
+        page.submit(STOP)
+    assert rig.sink.intents == []
 
 
 @pytest.mark.parametrize(

@@ -3,7 +3,9 @@
 Rules (docs/pendant.md states them for users):
 - one controlling input at a time: the first attached controls when nobody does; another takes
   control with `take_control`, refused while the controller holds a continuous jog;
-- only the controller's intents reach the machine; a refused submit never does;
+- only the controller's intents reach the machine; a refused submit never does; the one
+  exception is a stop, which any attached input may give (a STOP button on a device that is
+  only watching must still stop the machine, and stopping is never unsafe);
 - a new jog (a step, a go-to, or a continuous intent while none is held) is first checked with
   the sink's `can_jog`; neutral and stop intents always pass and end the held jog;
 - a continuous jog from an input with a `lease_s` arms a dead-man lease that each continuous
@@ -224,6 +226,10 @@ class Arbiter:
     # -- the rules behind the handles --------------------------------------------------------
 
     def _submit(self, handle: _Handle, intent: Intent, now_s: float) -> None:
+        if isinstance(intent, StopIntent) and not handle.detached:
+            self._release()
+            self._forward(intent)
+            return
         self._require_in_control(handle)
         if isinstance(intent, StopIntent) or (
             isinstance(intent, ContinuousIntent) and intent.is_neutral()
