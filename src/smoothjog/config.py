@@ -74,6 +74,25 @@ class SimConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class DeviceConfig:
+    """One [[device]] table: which input devices it is for, and its decoder's options.
+
+    The options are read by the decoder (inputs/), which knows its own keys; `table()` gives
+    them with this file and section named, so its errors point here.
+    """
+
+    kind: str
+    match: str | None  # None: every device this kind takes
+    options: Mapping[str, Any]
+    section: str
+    source: str
+
+    def table(self) -> Table:
+        """The decoder's options as a Table naming this file and section in its errors."""
+        return Table(self.options, self.section, self.source)
+
+
+@dataclass(frozen=True, slots=True)
 class Config:
     """The whole configuration; `source` is the file it came from (None: built-in defaults)."""
 
@@ -82,6 +101,7 @@ class Config:
     keepouts: tuple[KeepOut, ...] = ()
     pendant: PendantConfig = field(default_factory=PendantConfig)
     sim: SimConfig = field(default_factory=SimConfig)
+    devices: tuple[DeviceConfig, ...] = ()
     source: Path | None = None
 
 
@@ -160,6 +180,27 @@ def _keepouts(value: Any, source: str) -> tuple[KeepOut, ...]:
     return tuple(zones)
 
 
+def _devices(value: Any, source: str) -> tuple[DeviceConfig, ...]:
+    """Read the [[device]] array (the decoders check their own options when they are built)."""
+    if not isinstance(value, list):
+        raise ConfigError(f"{source}: device must be written as [[device]] tables")
+    devices: list[DeviceConfig] = []
+    for index, item in enumerate(value, start=1):
+        section = f"device #{index}"
+        if not isinstance(item, dict):
+            raise ConfigError(f"{source}: [{section}] is not a table: write it as [[device]]")
+        table = Table(item, section, source)
+        kind = table.text("kind", None)
+        if kind is None:
+            raise table.error(
+                "kind", 'is missing: say which kind of device this is, e.g. kind = "gamepad"'
+            )
+        match = table.text("match", None)
+        options = {k: v for k, v in item.items() if k not in ("kind", "match")}
+        devices.append(DeviceConfig(kind, match, options, f"{section} ({kind})", source))
+    return tuple(devices)
+
+
 def _pendant(table: Table) -> PendantConfig:
     """Read [pendant]."""
     host = table.text("host", "127.0.0.1")
@@ -179,7 +220,7 @@ def _sim(table: Table) -> SimConfig:
     return SimConfig(firmware=firmware, machine=machine)
 
 
-_SECTIONS = ("connection", "jog", "keepout", "pendant", "sim")
+_SECTIONS = ("connection", "device", "jog", "keepout", "pendant", "sim")
 
 
 def parse_config(text: str, source: str = "<config>") -> Config:
@@ -194,7 +235,7 @@ def parse_config(text: str, source: str = "<config>") -> Config:
                 f"{source}: unknown section {key!r}: the sections are {', '.join(_SECTIONS)}"
                 " (check the spelling)"
             )
-        if key != "keepout" and not isinstance(value, dict):
+        if key not in ("keepout", "device") and not isinstance(value, dict):
             raise ConfigError(f"{source}: {key} must be a section, written [{key}]")
 
     def section(name: str) -> Table:
@@ -206,6 +247,7 @@ def parse_config(text: str, source: str = "<config>") -> Config:
         keepouts=_keepouts(data.get("keepout", []), source),
         pendant=_pendant(section("pendant")),
         sim=_sim(section("sim")),
+        devices=_devices(data.get("device", []), source),
     )
 
 
