@@ -235,3 +235,30 @@ def test_soft_reset_restarts_and_the_host_reads_it_again(vh: VirtualHost) -> Non
     vh.set_intent(ContinuousIntent({"X": -1.0}, 0.2))
     vh.run_until(vh.now_s + 0.5)
     assert vh.rig.firmware.mpos_mm()[0] < -2.0
+
+
+def test_hold_then_resume_on_a_resting_machine_and_resume_refused_elsewhere(vh: VirtualHost) -> None:
+    c = control(vh)
+    with pytest.raises(ControlRefused, match="nothing to resume: the machine is in Idle"):
+        run(vh, c.resume())
+    assert run(vh, c.hold()) == CommandResult("!", True)
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state.startswith("Hold")
+    assert run(vh, c.resume()) == CommandResult("~", True)
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state == "Idle"
+    assert vh.host.ledger.stats.realtime[CONSOLE] == 2
+
+
+def test_a_hold_during_a_jog_ends_it_and_leaves_nothing_to_resume(vh: VirtualHost) -> None:
+    # A feed hold while jogging cancels the jog (Grbl 1.1): it ends Idle, and resume, which
+    # could otherwise run jog lines still queued, is refused.
+    c = control(vh)
+    vh.set_intent(ContinuousIntent({"X": -1.0}, 0.5))
+    vh.run_until(vh.now_s + 0.3)
+    run(vh, c.hold())
+    vh.run_until(vh.now_s + 1.0)
+    assert vh.model.state == "Idle"
+    assert not vh.host.busy()
+    with pytest.raises(ControlRefused, match="nothing to resume"):
+        run(vh, c.resume())

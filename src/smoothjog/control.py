@@ -182,6 +182,22 @@ class MachineControl:
         self.host.send_realtime(CONSOLE, byte)
         return CommandResult(f"0x{byte[0]:02X}", True)
 
+    async def hold(self) -> CommandResult:
+        """Feed hold (`!`): allowed at any time, as a stop is; a jog is better ended by STOP."""
+        self.host.send_realtime(CONSOLE, realtime.FEED_HOLD)
+        return CommandResult("!", True)
+
+    async def resume(self) -> CommandResult:
+        """Cycle start (`~`) after a feed hold; refused in any other state, where it would start
+        lines nobody is watching (or do nothing)."""
+        state = self.host.model.state or "an unknown state"
+        if not state.startswith("Hold"):
+            raise ControlRefused(f"nothing to resume: the machine is in {state}, not in Hold")
+        # A hold during a jog cancels the jog (it ends Idle, not Hold), so this never restarts
+        # jog lines; it resumes what the hold paused, a program's motion.
+        self.host.send_realtime(CONSOLE, realtime.CYCLE_START)
+        return CommandResult("~", True)
+
     async def console(self, line: str) -> CommandResult:
         """Send one line the user typed; settings and modes are read again when it changed them."""
         text = line.strip()
