@@ -69,7 +69,9 @@ class DeviceSource(Protocol):
 
 
 #: Runs a device's machine command and returns its outcome in words (None: nothing to say).
-CommandRunner = Callable[[DeviceCommand], Awaitable[str | None]]
+#: The second argument submits intents as this device (for go-to-zero's moves); it raises
+#: InputRefused in words.
+CommandRunner = Callable[[DeviceCommand, Callable[[Intent], None]], Awaitable[str | None]]
 #: The machine as a display should show it, or None while it is not known.
 ViewSource = Callable[[], DisplayView | None]
 #: Where a device's sentences for the user go (the log by default; the pendant shows them too).
@@ -204,6 +206,15 @@ class DeviceInput(Input):
         self.submitted.append((intent, True))
         self._last_refusal = None
 
+    def _submit_or_raise(self, intent: Intent) -> None:
+        handle = self._handle
+        if handle is None:
+            raise InputRefused("the device is not attached")
+        if not handle.in_control:
+            handle.take_control()
+        handle.submit(intent)
+        self.submitted.append((intent, True))
+
     def _command(self, command: DeviceCommand) -> None:
         if self._commands is None:
             self._tell(f"{self.name}: {command.name} is not available here")
@@ -216,7 +227,7 @@ class DeviceInput(Input):
     async def _run_command(self, command: DeviceCommand) -> None:
         assert self._commands is not None
         try:
-            outcome = await self._commands(command)
+            outcome = await self._commands(command, self._submit_or_raise)
         except Exception as exc:  # a failed command is told, never the device's end
             outcome = f"{command.name} failed: {exc}"
         if outcome:
