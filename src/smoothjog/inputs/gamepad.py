@@ -56,10 +56,11 @@ BTN_TRIGGER_HAPPY1 = 0x2C0
 _JOY_BUTTONS = range(0x120, 0x140)
 
 # Ranges used when the device does not give absinfo for a code (a recording without evtest's
-# header): the xpad stick range, xpadneo's Xbox One trigger range, the hat's -1..1 (devices §7.1).
+# header): xpad's sticks, the Xbox One triggers (xpad, xpadneo) and the hat's -1..1 (devices §7.1).
 STICK_DEFAULT = AbsRange(0, -32768, 32767)
 TRIGGER_DEFAULT = AbsRange(0, 0, 1023)
 HAT_DEFAULT = AbsRange(0, -1, 1)
+#: An event value is an s32 from the kernel; anything wider is clamped to it, never raised on.
 _S32 = (-(2**31), 2**31 - 1)
 
 #: Button names, the kernel's without "BTN_" (the code's names, not the labels printed on a pad).
