@@ -286,8 +286,6 @@ class KeyboardDecoder(Decoder):
         #: Jog keys pressed from rest while taps are on, not yet a hold; since when.
         self._pending: set[int] = set()
         self._pending_since_s: float | None = None
-        #: Keys seen held across a resync or a stop: ignored until released (see _resync).
-        self._latched: set[int] = set()
         self._speed_index = self._start_speed_index
         self._step_mode = self._start_step_mode
         #: The deflections and speed last sent; neutral at rest.
@@ -323,14 +321,14 @@ class KeyboardDecoder(Decoder):
         """Apply one frame's key changes; the jog is recomputed once at the frame's end."""
         if not isinstance(item, EvdevFrame):
             return []
-        out: list[Action] = []
         self._expire(item.t_s)
         if item.resync:
-            out.extend(self._resync(item))
-        else:
-            for ev in item.events:
-                if ev.type == EV_KEY:
-                    out.extend(self._key(ev.code, ev.value, item.t_s))
+            notices = self._resync()
+            return self._update() + notices  # the stop first, then the words
+        out: list[Action] = []
+        for ev in item.events:
+            if ev.type == EV_KEY:
+                out.extend(self._key(ev.code, ev.value, item.t_s))
         out.extend(self._update())
         return out
 
@@ -357,8 +355,6 @@ class KeyboardDecoder(Decoder):
             return self._release(code)
         if value != 1:
             return []  # 2 is autorepeat (devices §3.1): a held key is one press
-        # A press proves the key went up since it was latched (the release was lost with it).
-        self._latched.discard(code)
         binding = self._bindings.get(code)
         if binding is None:
             return []  # unbound, and KEY_NUMLOCK, which can never be bound
@@ -383,9 +379,6 @@ class KeyboardDecoder(Decoder):
         return []
 
     def _release(self, code: int) -> list[Action]:
-        if code in self._latched:
-            self._latched.discard(code)
-            return []
         if code in self._pending:
             self._pending.discard(code)
             if not self._pending:
@@ -394,17 +387,17 @@ class KeyboardDecoder(Decoder):
             if isinstance(binding, _Jog) and self._tap_step_mm is not None:
                 return [StepIntent(binding.axis, binding.sign * self._tap_step_mm, self.speed)]
             return []
-        self._held.discard(code)
+        self._held.discard(code)  # a key forgotten by a stop or a resync: nothing to do
         return []
 
     def _control(self, control: str) -> list[Action]:
         if control == "stop":
-            self._latch_all()
+            self._forget_keys()
             self._sent = self._neutral()  # the stop ends the jog; no neutral after it
             return [StopIntent()]
         if control == "step":
             # Keys held across the switch would start the other mode's motion by themselves.
-            self._latch_all()
+            self._forget_keys()
             self._step_mode = not self._step_mode
             return [DeviceNotice(self.describe())]
         index = self._speed_index + (1 if control == "speed+" else -1)
@@ -414,8 +407,8 @@ class KeyboardDecoder(Decoder):
         self._speed_index = index
         return [DeviceNotice(f"keyboard jog speed {self.speed * 100:g} %")]
 
-    def _latch_all(self) -> None:
-        self._latched |= self._held | self._pending
+    def _forget_keys(self) -> None:
+        """Keys down now drive nothing more: only a key pressed anew (value 1) moves again."""
         self._held.clear()
         self._pending.clear()
         self._pending_since_s = None
@@ -428,20 +421,17 @@ class KeyboardDecoder(Decoder):
             self._pending.clear()
             self._pending_since_s = None
 
-    def _resync(self, frame: EvdevFrame) -> list[Action]:
-        """Events were lost (SYN_DROPPED): stop, and take only keys pressed anew.
+    def _resync(self) -> list[Action]:
+        """Events were lost (SYN_DROPPED): stop; only a key pressed anew moves again.
 
-        A key listed as held may have been released and pressed again in the gap, and the jog
-        ran blind for as long as the gap lasted; devices §9.4 counts SYN_DROPPED while moving
-        among the causes to stop. So the jog stops (neutral, from _update) and every listed key
-        is latched: it drives nothing until it is released and pressed again. Keys not listed
-        are up.
+        The frame lists the keys held now, but a listed key may have been let go and pressed
+        again in the gap, and the jog ran blind for as long as the gap lasted; devices §9.4
+        counts SYN_DROPPED while moving among the causes to stop. So every key is forgotten,
+        listed or not: the jog stops (neutral, from _update), a listed key's release is then no
+        news and its autorepeat is never a press.
         """
         was_moving = self.moving
-        self._held.clear()
-        self._pending.clear()
-        self._pending_since_s = None
-        self._latched = {ev.code for ev in frame.events if ev.type == EV_KEY and ev.value != 0}
+        self._forget_keys()
         if not was_moving:
             return []
         return [DeviceNotice("keyboard events were lost: jog stopped; press the key again")]
