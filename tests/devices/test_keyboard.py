@@ -570,6 +570,12 @@ def test_option_errors_name_the_key(options: dict[str, Any], key: str) -> None:
     assert key in str(err.value)
 
 
+def test_one_speed_needs_no_index() -> None:
+    """A single speed is used as it is; the default index follows the list."""
+    dec = decoder(speeds=[0.6])
+    assert dec.feed(press(0.0, "KP6")) == [jog(x=1.0, speed=0.6)]
+
+
 def test_every_default_is_usable() -> None:
     """The defaults table gives a working decoder."""
     dec = KeyboardDecoder(DeviceInfo("k"), Table({}, "device", "<defaults>"), AXES)

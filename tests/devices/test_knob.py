@@ -211,7 +211,7 @@ def test_recorded_wheel_ignores_hi_res() -> None:
         ([(EV_KEY, DOWN, 1)], -1),
         ([(EV_KEY, UP, 1), (EV_KEY, DOWN, 1)], None),  # cancels: nothing to send
         ([(EV_KEY, UP, 2), (EV_KEY, UP, 0)], None),  # autorepeat and release are no detents
-        ([(EV_REL, REL_WHEEL_HI_RES, 120), (EV_REL, REL_HWHEEL_HI_RES, -120)], None),
+        ([(EV_REL, REL_WHEEL_HI_RES, 30), (EV_REL, REL_HWHEEL_HI_RES, 60)], None),  # 1/120 detents
         ([(EV_REL, REL_HWHEEL, 1), (EV_REL, REL_X, 5)], None),
         ([(EV_MSC, 4, 0xC00E9)], None),
         ([(EV_REL, REL_DIAL, 128), (EV_REL, REL_DIAL, -(2**31))], None),  # garbage, not turns

@@ -191,7 +191,8 @@ def _parse_action(options: Table, where: str, text: Any, axes: Sequence[str]) ->
         missing = [a for a in chosen if a not in axes]
         if missing:
             raise options.error(
-                where, f"= {word!r} names {''.join(missing)}, which the machine lacks ({axes})"
+                where,
+                f"= {word!r} names {''.join(missing)}: the machine has {', '.join(axes)}",
             )
         return DeviceCommand("zero", axes=chosen)
     if name == "override":
@@ -252,8 +253,9 @@ class KeyboardDecoder(Decoder):
         super().__init__(info, options, axes)
         self._bindings = _read_bindings(options, self.axes)
         self._speeds = self._read_speeds(options)
+        top = len(self._speeds) - 1
         self._start_speed_index = options.integer(
-            "speed_index", 1, at_least=0, at_most=len(self._speeds) - 1
+            "speed_index", min(1, top), at_least=0, at_most=top
         )
         self._tap_step_mm: float | None = None
         if options.data.get("tap_step_mm") is not None:
@@ -387,7 +389,7 @@ class KeyboardDecoder(Decoder):
             if isinstance(binding, _Jog) and self._tap_step_mm is not None:
                 return [StepIntent(binding.axis, binding.sign * self._tap_step_mm, self.speed)]
             return []
-        self._held.discard(code)  # a key forgotten by a stop or a resync: nothing to do
+        self._held.discard(code)  # a key forgotten by a stop, a resync or a loss: no news
         return []
 
     def _control(self, control: str) -> list[Action]:

@@ -107,10 +107,11 @@ class KnobDecoder(Decoder):
         self._reset()
 
     def _read_axis(self, options: Table) -> str:
-        axis = (options.text("axis", "X") or "X").strip().upper()
+        default = "X" if "X" in self.axes else self.axes[0]
+        axis = (options.text("axis", default) or default).strip().upper()
         if axis not in self.axes:
             raise options.error(
-                "axis", f"= {axis!r} is not an axis of this machine: use one of {self.axes}"
+                "axis", f"= {axis!r} is not an axis of this machine: use {', '.join(self.axes)}"
             )
         return axis
 
@@ -123,7 +124,8 @@ class KnobDecoder(Decoder):
             axis = item.strip().upper() if isinstance(item, str) else item
             if axis not in self.axes:
                 raise options.error(
-                    "axes", f"holds {item!r}, not an axis of this machine: use {self.axes}"
+                    "axes",
+                    f"holds {item!r}, not an axis of this machine: use {', '.join(self.axes)}",
                 )
             if axis not in cycle:
                 cycle.append(axis)
