@@ -65,7 +65,7 @@ class HidRecording:
 _EVENT = re.compile(
     r"^Event:\s*time\s+(?P<t>-?\d+(?:\.\d+)?),\s*"
     r"(?:type\s+(?P<type>\d+)\s*(?:\([^)]*\))?,\s*code\s+(?P<code>\d+)\s*(?:\([^)]*\))?,\s*"
-    r"value\s+(?P<value>-?\d+)|-+\s*(?P<syn>SYN_[A-Z_]+)\s*-+)\s*$"
+    r"value\s+(?P<value>-?[0-9a-fA-F]+)|-+\s*(?P<syn>SYN_[A-Z_]+)\s*-+)\s*$"
 )
 _DEVICE_ID = re.compile(
     r"^Input device ID:\s*bus\s+0x(?P<bus>[0-9a-fA-F]+)\s+vendor\s+0x(?P<vendor>[0-9a-fA-F]+)"
@@ -82,8 +82,7 @@ _EVTEST_NOISE = (
     "Supported events",
     "Properties",
     "Testing ...",
-    "Key repeat handling",
-    "Repeat type",
+    "Repeat code",
     "Select the device",
     "Available devices",
     "/dev/input/",
@@ -140,9 +139,15 @@ def parse_evtest(lines: Iterable[str], *, source: str = "<evtest>") -> EvdevReco
                     continue
                 frames.extend(assembler.feed(rel_t, 0, code, 0))
             else:
-                frames.extend(
-                    assembler.feed(rel_t, int(m["type"]), int(m["code"]), int(m["value"]))
-                )
+                type_ = int(m["type"])
+                # evtest prints MSC_SCAN values in hex ("value 7005c"); every other value is a
+                # decimal number. The scan codes are dropped by the frames anyway.
+                base = 16 if type_ == 4 else 10
+                try:
+                    value = int(m["value"], base)
+                except ValueError:
+                    raise RecordingError(f"{where}: value {m['value']!r} is not a number") from None
+                frames.extend(assembler.feed(rel_t, type_, int(m["code"]), value))
             continue
         if t0 is not None:
             raise RecordingError(
@@ -152,6 +157,9 @@ def parse_evtest(lines: Iterable[str], *, source: str = "<evtest>") -> EvdevReco
             bus, vendor, product = (int(m[k], 16) for k in ("bus", "vendor", "product"))
         elif m := _DEVICE_NAME.match(line):
             name = m["name"]
+        elif line.startswith(("Key repeat handling", "Repeat type")):
+            # The key-repeat block's "Value" lines are not an axis's range.
+            current_type, current_code = None, None
         elif m := _TYPE.match(line):
             current_type, current_code = int(m["type"]), None
         elif m := _CODE.match(line):
