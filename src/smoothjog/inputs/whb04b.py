@@ -393,7 +393,10 @@ class Whb04bDecoder(Decoder):
         changed = not first and (axis != self._axis or feed != self._feed)
         self._axis, self._feed = axis, feed
         pressed = frozenset(k for k in (report.key1, report.key2) if 0x01 <= k <= 0x10)
-        presses = [k for k in (report.key1, report.key2) if k in pressed - self._pressed]
+        # A key counts once, on the report where it first shows: held keys repeat in reports.
+        presses = [
+            k for k in dict.fromkeys((report.key1, report.key2)) if k in pressed - self._pressed
+        ]
         fn = KEY_FN in pressed
         self._pressed = pressed
         # The keys are swapped against their labels: 0x0e (labelled MPG) is continuous and
