@@ -89,7 +89,7 @@ def parse_command(text: str) -> DeviceCommand | None:
         axes = tuple(rest.upper())
         bad = [a for a in axes if a not in ALL_AXES]
         if bad:
-            raise ValueError(f"names no axis {bad[0]!r}: write e.g. \"zero:XY\" or \"zero\"")
+            raise ValueError(f'names no axis {bad[0]!r}: write e.g. "zero:XY" or "zero"')
         return DeviceCommand("zero", axes=axes)
     if head == "override":
         kind, _, step = rest.partition(":")
@@ -215,11 +215,11 @@ class _Shuttle(Decoder):
             number = int(key) if isinstance(key, str) and key.isdigit() else 0
             if not 1 <= number <= self.model.buttons:
                 raise options.error(
-                    where, f"is not a button: the {self.model.name} has buttons 1 to "
-                    f"{self.model.buttons}"
+                    where,
+                    f"is not a button: the {self.model.name} has buttons 1 to {self.model.buttons}",
                 )
             if not isinstance(value, str) or not value.strip():
-                raise options.error(where, f"= {value!r} is not an action: write e.g. \"X\"")
+                raise options.error(where, f'= {value!r} is not an action: write e.g. "X"')
             action = value.strip()
             if action == "none":
                 table.pop(number, None)
@@ -240,8 +240,8 @@ class _Shuttle(Decoder):
                 if command is None:
                     raise options.error(
                         where,
-                        f"= {value!r} is not an action: use an axis letter, \"stop\", \"step\", "
-                        f"\"none\" or one of {', '.join(DEVICE_COMMANDS)}",
+                        f'= {value!r} is not an action: use an axis letter, "stop", "step", '
+                        f'"none" or one of {", ".join(DEVICE_COMMANDS)}',
                     )
                 missing = [a for a in command.axes if a not in self.axes]
                 if missing:
@@ -586,8 +586,7 @@ def _steps(options: Table) -> tuple[float, ...]:
     if raw is None:
         return DEFAULT_STEPS_MM
     return tuple(
-        options.check_number("steps_mm", v, at_least=STEP_MIN_MM, at_most=STEP_MAX_MM)
-        for v in raw
+        options.check_number("steps_mm", v, at_least=STEP_MIN_MM, at_most=STEP_MAX_MM) for v in raw
     )
 
 
