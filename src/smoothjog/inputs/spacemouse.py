@@ -60,6 +60,9 @@ MAX_BUTTONS: Final = 64
 BTN_0: Final = 0x100
 #: How far another axis must lead the dominant one to take over (shaped deflection).
 DOMINANT_MARGIN: Final = 0.1
+#: Arming needs the cap within this of rest even with no deadzone: the first report of a push
+#: from rest is small (at 125 reports/s), a cap held deflected is not.
+ARM_BAND: Final = 0.05
 #: The slowest speed "slower" goes to (1/32 of full).
 SPEED_MIN: Final = 1.0 / 32.0
 
@@ -238,16 +241,20 @@ class _SpaceMouse(Decoder):
         self._dominant_axis = best
         return {a: (v if a == best else 0.0) for a, v in shaped.items()}
 
-    def _known(self) -> bool:
-        return all(self._values[index] is not None for index, _ in self.mapping.values())
+    def _near_rest(self) -> bool:
+        """Every mapped channel known and within the deadzone (or ARM_BAND, if wider)."""
+        band = max(self.deadzone, ARM_BAND)
+        values = [self._values[index] for index, _ in self.mapping.values()]
+        return all(v is not None and abs(v) <= band for v in values)
 
     def _evaluate(self) -> list[Action]:
-        """The jog for the values now: arm at neutral, send changes, neutral once."""
+        """The jog for the values now: arm near rest, send changes, neutral once."""
+        if not self._armed:
+            if not self._near_rest():
+                return []
+            self._armed = True  # and a cap armed near rest may already move gently
         shaped = self._shaped()
         neutral = all(v == 0.0 for v in shaped.values())
-        if not self._armed:
-            self._armed = neutral and self._known()
-            return []
         if neutral:
             if self._sent is None:
                 return []
