@@ -203,7 +203,7 @@ def test_a_watchers_stop_stops_the_controllers_jog(rig: Rig) -> None:
 
 
 def test_a_detached_inputs_stop_is_refused(rig: Rig) -> None:
-    _, pad = rig.attach("pad")
+    rig.attach("pad")
     _, page = rig.attach("page", kind="web")
     page.detach()
     with pytest.raises(InputRefused, match="detached"):

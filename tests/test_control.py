@@ -237,7 +237,7 @@ def test_soft_reset_restarts_and_the_host_reads_it_again(vh: VirtualHost) -> Non
     assert vh.rig.firmware.mpos_mm()[0] < -2.0
 
 
-def test_hold_then_resume_on_a_resting_machine_and_resume_refused_elsewhere(vh: VirtualHost) -> None:
+def test_hold_then_resume_at_rest_and_resume_refused_elsewhere(vh: VirtualHost) -> None:
     c = control(vh)
     with pytest.raises(ControlRefused, match="nothing to resume: the machine is in Idle"):
         run(vh, c.resume())

@@ -23,6 +23,8 @@ ALLOWED: dict[str, set[str]] = {
     "control": {"core", "links", "host"},  # machine commands beside the engine, over the host
     "virtual": {"core", "sim", "links", "inputs", "host", "vclock"},
     "config": {"core", "links"},  # it checks tcp:// URLs with the TCP link's own parser
+    # The session's input devices: found (inputs), run under the arbiter, commands by control.
+    "devices": {"core", "links", "inputs", "host", "arbiter", "control", "config", "handshake"},
     "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs", "control"},
     "cli": {
         "core",
@@ -36,6 +38,7 @@ ALLOWED: dict[str, set[str]] = {
         "handshake",
         "config",
         "control",
+        "devices",
         "web",
     },
 }

@@ -1,5 +1,9 @@
 """`smoothjog jog --replay FILE`: run a script of timed jog intents and print what happened.
 
+`--input-replay FILE --input-kind KIND` plays a recorded device stream instead (evtest text for
+evdev devices, `SECONDS HEX` lines for hidraw ones, docs/devices.md) through that kind's decoder
+and the arbiter, exactly as the live device would drive the machine.
+
 Without --port or --connect the script runs on the built-in simulator in virtual time (fast and
 repeatable; `--realtime` runs it on the wall clock instead). With a controller it runs in real time.
 Both are the same runner on the same host; only the event loop's clock differs (vclock.py).
@@ -24,8 +28,10 @@ from smoothjog.core.firmware import FIRMWARE_NAMES
 from smoothjog.core.jogger import EngineEvent, Jogger, JogTuning
 from smoothjog.core.ledger import ENGINE
 from smoothjog.core.units import Vec
+from smoothjog.devices import DeviceReplay, load_device_replay
 from smoothjog.host import Host
-from smoothjog.inputs.replay import TimedIntent, load_replay
+from smoothjog.inputs.kinds import KIND_NAMES
+from smoothjog.inputs.replay import ReplayError, TimedIntent, load_replay
 from smoothjog.links.base import Link
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
@@ -41,7 +47,19 @@ def register(subparsers: Any) -> None:
         help="run a replay file of timed jog intents (built-in simulator by default)",
         description=__doc__,
     )
-    parser.add_argument("--replay", required=True, metavar="FILE", help="JSON Lines intents")
+    script = parser.add_mutually_exclusive_group(required=True)
+    script.add_argument("--replay", metavar="FILE", help="JSON Lines intents")
+    script.add_argument(
+        "--input-replay",
+        metavar="FILE",
+        help="a recorded device stream (evtest text, or SECONDS HEX lines for hidraw)",
+    )
+    parser.add_argument(
+        "--input-kind",
+        choices=KIND_NAMES,
+        metavar="KIND",
+        help=f"the device of --input-replay: {', '.join(KIND_NAMES)}",
+    )
     add_connection_args(parser)
     parser.add_argument("--firmware", choices=FIRMWARE_NAMES, help="simulated firmware")
     parser.add_argument(
@@ -72,6 +90,8 @@ class Summary:
     idle: bool = False
     lines_sent: int = 0
     faults: list[str] = field(default_factory=list)
+    #: What a replayed device did, in lines (None for a --replay script).
+    device: list[str] | None = None
 
     def lines(self, where: str) -> list[str]:
         """The readable summary."""
@@ -89,6 +109,8 @@ class Summary:
             f"{self.worst_tracking_steps:.2f} steps (worst axis, worst stop)",
             f"  final state     {self.final_state or 'unknown'} at MPos {pos}",
         ]
+        if self.device is not None:
+            out += [f"  {line}" for line in self.device]
         if self.faults:
             out.append("  faults:")
             out += [f"    - {f}" for f in self.faults]
@@ -118,7 +140,18 @@ def _fill(summary: Summary, engine: Jogger, events: list[EngineEvent]) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the replay; 0 when it ended idle with no fault."""
     config = config_from_args(args)
-    script = load_replay(args.replay)
+    script: list[TimedIntent] | DeviceReplay
+    if args.input_replay is not None:
+        if args.input_kind is None:
+            raise ReplayError(
+                "--input-replay needs --input-kind, the kind of device recorded: "
+                + ", ".join(KIND_NAMES)
+            )
+        script = load_device_replay(args.input_replay, args.input_kind, config.devices)
+    else:
+        if args.input_kind is not None:
+            raise ReplayError("--input-kind goes with --input-replay, not --replay")
+        script = load_replay(args.replay)
     connection = connection_from_args(args, config)
     link = link_for(connection)
     firmware = args.firmware or config.sim.firmware
@@ -145,7 +178,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _run(
-    link: Link, script: list[TimedIntent], config: Config, timeout_s: float, settle_s: float
+    link: Link,
+    script: list[TimedIntent] | DeviceReplay,
+    config: Config,
+    timeout_s: float,
+    settle_s: float,
 ) -> Summary:
     """Start a host on link, play the script on the loop's clock, wait for rest, summarise."""
     events: list[EngineEvent] = []
@@ -164,9 +201,12 @@ async def _run(
         rig_t0 = link.rig.now_s if isinstance(link, SimLink) else 0.0
         summary = Summary()
         try:
-            for item in script:
-                await asyncio.sleep(max(t0 + item.t_s - loop.time(), 0.0))
-                host.set_intent(item.intent)
+            if isinstance(script, DeviceReplay):
+                summary.device = await script.play(host)
+            else:
+                for item in script:
+                    await asyncio.sleep(max(t0 + item.t_s - loop.time(), 0.0))
+                    host.set_intent(item.intent)
             try:
                 await host.wait_idle(settle_s)
                 summary.idle = True

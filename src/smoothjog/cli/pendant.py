@@ -24,6 +24,7 @@ from smoothjog.cli.common import (
 from smoothjog.config import DEFAULT_HTTP_PORT, Config
 from smoothjog.core.firmware import FIRMWARE_NAMES
 from smoothjog.core.jogger import EngineEvent, JogTuning
+from smoothjog.devices import DeviceManager, MachineCommands, check_device_configs, machine_view
 from smoothjog.handshake import format_summary
 from smoothjog.host import Host
 from smoothjog.links.base import Link
@@ -60,6 +61,16 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="serve on the local network too, guarded by a pairing token shown as a QR code",
     )
+    devices = parser.add_argument_group("input devices (docs/devices.md)")
+    devices.add_argument(
+        "--input",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="jog with a device: a kind (gamepad, whb04b, ...), a /dev path, vendor:product, "
+        "part of its name, or auto (every device but keyboards); repeatable; "
+        "`smoothjog devices` lists them",
+    )
     parser.set_defaults(func=run)
 
 
@@ -74,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
             "machine; use --lan, which requires a pairing token, or bind 127.0.0.1"
         )
     connection = connection_from_args(args, config)
+    # A bad [[device]] option is refused before the machine is touched.
+    check_device_configs(config.devices)
     link = link_for(connection)
     if link is None:
         firmware = args.firmware or config.sim.firmware
@@ -83,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
             f"smoothjog: no controller given: using the built-in simulator ({firmware}, {machine})"
         )
     return asyncio.run(_serve(link, config, args, connection.timeout_s))
+
+
+def _print_notice(text: str) -> None:
+    print(f"smoothjog: {text}", file=sys.stderr, flush=True)
 
 
 def _print_event(event: EngineEvent) -> None:
@@ -121,12 +138,24 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
             run_pendant(backend, host=host, port=port, lan=lan, arbiter=arbiter)
         )
         waiter = asyncio.create_task(stop.wait())
+        tasks = [server, waiter]
+        if args.input or config.devices:
+            manager = DeviceManager(
+                arbiter,
+                wishes=args.input,
+                configs=config.devices,
+                axes=lambda: session.model.axis_letters,
+                commands=MachineCommands(backend.control),
+                view=machine_view(backend.control),
+                notices=_print_notice,
+            )
+            tasks.append(asyncio.create_task(manager.run()))
         try:
             await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
         finally:
-            for task in (server, waiter):
+            for task in tasks:
                 task.cancel()
-            await asyncio.gather(server, waiter, return_exceptions=True)
+            await asyncio.gather(*tasks, return_exceptions=True)
             await session.close()  # always: stop any jog with the handshake, then let go
         if not server.cancelled() and server.exception() is not None:
             raise server.exception()  # type: ignore[misc]  # e.g. the PendantError sentence

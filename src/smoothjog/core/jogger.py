@@ -1349,7 +1349,9 @@ class Jogger:
         i = run.axis
         spm = self.limits.steps_per_mm[i]
         chain = self._wheel_chains.get(i)
-        if chain is None or chain.end_mm != start[i]:
+        # Compared in whole steps: a machine that came to rest between reports reads back its
+        # position on the step grid, a float an ulp away from the chain's own sum.
+        if chain is None or round(chain.end_mm * spm) != round(start[i] * spm):
             chain = _WheelChain(start[i], Decimal(0), start[i])
         total_mm = chain.total_mm + run.sign * run.dist_mm
         target = inc.nearest_step_mm(Decimal(chain.anchor_mm) + total_mm, spm)

@@ -36,7 +36,12 @@ def normalise(value: int, rng: AbsRange, *, one_sided: bool = False) -> float:
     if one_sided:
         return max(0.0, min(1.0, (value - rng.min) / span))
     centre = (rng.max + rng.min) / 2.0
-    return clamp_unit((value - centre) / (span / 2.0))
+    offset = value - centre
+    # An even range (-32768..32767) has its centre between two values; both read as the
+    # centre, so a stick at rest on the other axis adds no hair of motion to a jog.
+    if abs(offset) <= 0.5:
+        return 0.0
+    return clamp_unit(offset / (span / 2.0))
 
 
 def deadzone(x: float, dz: float) -> float:
