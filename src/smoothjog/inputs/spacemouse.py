@@ -382,6 +382,8 @@ class SpaceMouseEvdevDecoder(_SpaceMouse):
             if 0 <= code < len(SOURCES):
                 self._abs.add(code)
                 self._values[code] = normalise(rng.value, rng)
+        # Absolute axes are known from the start: a cap at rest when opened is armed at once.
+        self._armed = self._near_rest()
 
     @classmethod
     def matches(cls, info: DeviceInfo) -> bool:
@@ -440,8 +442,9 @@ class SpaceMouseEvdevDecoder(_SpaceMouse):
         return self.info.absinfo.get(code, AbsRange(0, -LOGICAL_MAX, LOGICAL_MAX))
 
     def _expire(self, now_s: float) -> None:
+        # The same sum as deadline_s(), so a tick at the deadline always expires the channel.
         for code, seen in enumerate(self._seen_t_s):
-            if seen is not None and code not in self._abs and now_s - seen >= self.stale_s:
+            if seen is not None and code not in self._abs and now_s >= seen + self.stale_s:
                 self._values[code] = 0.0
 
     def deadline_s(self) -> float | None:
