@@ -524,7 +524,7 @@ class ShuttleEvdevDecoder(_Shuttle):
         """Events were lost: stop, take the held buttons as given, the ring and counter unknown."""
         out = self._moving_stop()
         if out:
-            out.append(DeviceNotice(f"{self.model.name}: events were lost, jog stopped"))
+            out.append(DeviceNotice(f"{self.model.name}: events were lost: jog stopped"))
         held = {
             n
             for ev in frame.events
