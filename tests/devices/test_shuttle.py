@@ -632,7 +632,7 @@ def test_evdev_resync_stops_and_the_ring_must_be_seen_at_centre() -> None:
     decoder = evdev_shuttle()
     feed(decoder, frame(0.0, (EV_KEY, BTN_4, 1)), frame(0.1, (EV_REL, REL_WHEEL, 5)))
     got = feed(decoder, frame(0.2, (EV_KEY, BTN_4, 1), resync=True))
-    assert got == [StopIntent(), DeviceNotice("ShuttleXpress: events were lost, jog stopped")]
+    assert got == [StopIntent(), DeviceNotice("ShuttleXpress: events were lost: jog stopped")]
     assert decoder.active_axis == "X"
     assert feed(decoder, frame(0.21, (EV_REL, REL_WHEEL, 5))) == []
     assert feed(decoder, frame(0.3, (EV_REL, REL_DIAL, 4))) == []  # centre; counter rebased
@@ -645,7 +645,7 @@ def test_evdev_resync_without_the_button_disables() -> None:
     feed(decoder, frame(0.1, (EV_REL, REL_WHEEL, 5)))
     assert feed(decoder, frame(0.2, resync=True)) == [
         StopIntent(),
-        DeviceNotice("ShuttleXpress: events were lost, jog stopped"),
+        DeviceNotice("ShuttleXpress: events were lost: jog stopped"),
     ]
     assert decoder.active_axis is None
 

@@ -449,7 +449,9 @@ class ShuttleEvdevDecoder(_Shuttle):
     driver does the same on the next counter event, after a 5 ms gap, devices §6.3). A frame
     within `centre_gap_s` of the last ring event is not taken as one (a recording may split one
     report). When the counter sits at 0 nothing at all arrives on release, so a ring with no
-    event for `ring_timeout_s` is zeroed as well.
+    event for `ring_timeout_s` is zeroed as well. That zero stands in for the centre the kernel
+    dropped, so the ring counts as having passed 0: a spring ring reported deflected again
+    afterwards has a hand on it (and, in hold mode, an axis button held).
 
     The counter value 0 is dropped too; the counter is absolute, so the next value still gives
     the right count across the wrap (255, then 1, is +2).
@@ -524,7 +526,7 @@ class ShuttleEvdevDecoder(_Shuttle):
         """Events were lost: stop, take the held buttons as given, the ring and counter unknown."""
         out = self._moving_stop()
         if out:
-            out.append(DeviceNotice(f"{self.model.name}: events were lost, jog stopped"))
+            out.append(DeviceNotice(f"{self.model.name}: events were lost: jog stopped"))
         held = {
             n
             for ev in frame.events

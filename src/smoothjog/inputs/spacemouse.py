@@ -9,11 +9,12 @@ table; rotations move nothing unless mapped (e.g. `A = "rz"`).
 - `dominant`: only the most deflected axis moves, so a push that is not quite straight stays on
   one axis; another axis takes over only once it leads by DOMINANT_MARGIN (no flicker on a
   diagonal).
-- Buttons (1-based, `buttons` table): "stop", "dominant" (toggle), "faster" / "slower" (halve or
-  double the speed), "none", or a machine command (device.DEVICE_COMMANDS).
-- Safety: the cap must be seen at neutral before it moves: at start-up, after a loss, after the
-  stop button and after a watchdog or lost-event stop, so a cap held deflected then does not
-  start a jog.
+- Buttons (1-based, `buttons` table): "stop", "dominant" (toggle), "faster" / "slower" (double
+  or halve the speed), "none", or a machine command (device.DEVICE_COMMANDS). Button n is bit
+  n-1 of report 3 on hidraw and BTN_0 + n-1 on evdev (the Pro's are sparse: remap them here).
+- Safety: the cap must be seen at rest (every mapped channel within the deadzone, or ARM_BAND
+  if that is wider) before it moves: at start-up, after a loss, after the stop button and after
+  a watchdog or lost-event stop, so a cap held deflected then does not start a jog.
 
 `SpaceMouseDecoder` reads hidraw, where the device sends its own zeros on release (three
 double reports, devices §5.1). `SpaceMouseEvdevDecoder` reads the event node, where the kernel
@@ -104,7 +105,7 @@ class _SpaceMouse(Decoder):
     kind: ClassVar[str] = "spacemouse"
 
     def __init__(self, info: DeviceInfo, options: Table, axes: Sequence[str]) -> None:
-        """Read the options (see the module docstring); the cap is not armed until neutral."""
+        """Read the options (see the module docstring); not armed until the cap is seen at rest."""
         super().__init__(info, options, axes)
         self.model = USB_IDS.get((info.vendor, info.product), "SpaceMouse")
         self.mapping = self._read_axes(options)
@@ -382,6 +383,8 @@ class SpaceMouseEvdevDecoder(_SpaceMouse):
             if 0 <= code < len(SOURCES):
                 self._abs.add(code)
                 self._values[code] = normalise(rng.value, rng)
+        # Absolute axes are known from the start: a cap at rest when opened is armed at once.
+        self._armed = self._near_rest()
 
     @classmethod
     def matches(cls, info: DeviceInfo) -> bool:
@@ -440,8 +443,9 @@ class SpaceMouseEvdevDecoder(_SpaceMouse):
         return self.info.absinfo.get(code, AbsRange(0, -LOGICAL_MAX, LOGICAL_MAX))
 
     def _expire(self, now_s: float) -> None:
+        # The same sum as deadline_s(), so a tick at the deadline always expires the channel.
         for code, seen in enumerate(self._seen_t_s):
-            if seen is not None and code not in self._abs and now_s - seen >= self.stale_s:
+            if seen is not None and code not in self._abs and now_s >= seen + self.stale_s:
                 self._values[code] = 0.0
 
     def deadline_s(self) -> float | None:
