@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from smoothjog.arbiter import Arbiter, Lease
+from smoothjog.arbiter import STALL_GRACE_S, Arbiter, Lease
 from smoothjog.core.errors import InputRefused, JogBuildError, SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, LeaseExpired, Notice
@@ -459,9 +459,63 @@ def test_silence_for_the_lease_stops_once_counts_a_trip_and_tells_the_input(rig:
     assert not rig.arbiter.check(6.0)
     assert rig.sink.stops() == 1
     assert rig.arbiter.trips == 1
-    # Still the controller; a later jog (the user still holds the stick) starts over.
+    # Still the controller, but a jog never restarts by itself under a finger still held: the
+    # next heartbeats are refused until the input releases, then a new press jogs.
+    with pytest.raises(InputRefused, match="release the controls and press again"):
+        handle.submit(JOG)
+    assert rig.sink.intents == [JOG, STOP]
+    assert not rig.arbiter.lease_armed
+    handle.submit(NEUTRAL)
     handle.submit(JOG)
     assert rig.arbiter.lease_armed
+    assert rig.sink.intents == [JOG, STOP, JOG]
+
+
+def test_a_stop_also_ends_the_trip_and_other_inputs_are_not_held_back(rig: Rig) -> None:
+    _, pad = rig.attach("pad")
+    _, page = rig.attach("page", kind="web")
+    pad.submit(JOG)
+    assert rig.arbiter.check(10.0)
+    pad.submit(STOP)
+    pad.submit(JOG)
+    assert rig.sink.intents[-1] == JOG
+    pad.submit(STOP)
+    assert rig.arbiter.check(20.0) is False  # nothing held
+    pad.submit(JOG)
+    assert rig.arbiter.check(30.0)
+    page.take_control()
+    page.submit(JOG)  # another input was not the one that tripped
+    assert rig.sink.intents[-1] == JOG
+
+
+def test_a_late_timer_first_lets_the_heartbeats_the_stall_held_back_arrive(rig: Rig) -> None:
+    # The session's own loop stalled 300 ms (a loaded machine): the page's heartbeats of that
+    # time are waiting in the socket and are handled right after the timer; no false trip.
+    _, pad = rig.attach("pad")
+    pad.submit(JOG)
+    (timer,) = rig.clock.pending()
+    rig.clock.now = timer.when + 0.3
+    timer.fired = True
+    timer.callback()
+    assert rig.arbiter.trips == 0
+    pad.submit(JOG)  # the held-back heartbeat
+    rig.clock.advance(rig.clock.now + 0.1)
+    assert rig.arbiter.trips == 0
+    assert rig.sink.stops() == 0
+
+
+def test_a_late_timer_still_stops_a_silent_input_after_the_grace(rig: Rig) -> None:
+    _, pad = rig.attach("pad")
+    pad.submit(JOG)
+    (timer,) = rig.clock.pending()
+    late_s = timer.when + 0.3
+    rig.clock.now = late_s
+    timer.fired = True
+    timer.callback()
+    assert rig.arbiter.trips == 0
+    rig.clock.advance(late_s + STALL_GRACE_S)
+    assert rig.arbiter.trips == 1
+    assert rig.sink.stops() == 1
 
 
 @pytest.mark.parametrize("renew", ["submit", "alive"])

@@ -10,7 +10,8 @@ Rules (docs/pendant.md states them for users):
   the sink's `can_jog`; neutral and stop intents always pass and end the held jog;
 - a continuous jog from an input with a `lease_s` arms a dead-man lease that each continuous
   submit or `alive()` renews; when it runs out the machine is stopped once, the trip counted and
-  the input told why;
+  the input told why; that input's continuous jogs are then refused until it releases
+  (neutral or stop), so a jog never restarts by itself under a finger still held;
 - when the controlling input goes away (detach, or its `run` returns or raises) while it drives
   any motion (a held jog or queued steps), the machine is stopped; a watcher leaving does nothing.
 
@@ -33,6 +34,12 @@ from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, LeaseExpired, kind_noun
 
 log = logging.getLogger(__name__)
+
+
+#: A lease timer this late (s) means the session's own loop stalled, not only the input.
+LATE_TIMER_S = 0.03
+#: How long a late timer waits for the heartbeats the stall held back before it stops (s).
+STALL_GRACE_S = 0.02
 
 
 class IntentSink(Protocol):
@@ -141,6 +148,11 @@ class Arbiter:
         self._listeners: list[Callable[[], None]] = []
         #: How many times the dead-man lease ran out and stopped the machine.
         self.trips = 0
+        #: Inputs whose held jog the dead-man stopped and that have not released since.
+        self._tripped: set[_Handle] = set()
+        self._timer_due_s = 0.0
+        #: The lease timer ran late once since the last renewal and was given STALL_GRACE_S.
+        self._graced = False
 
     # -- observation -------------------------------------------------------------------------
 
@@ -217,6 +229,7 @@ class Arbiter:
         log.warning("dead-man: nothing heard from %s for %.0f ms, stopping", name, silent_s * 1e3)
         self._halt("dead-man")
         if holder is not None:
+            self._tripped.add(holder)
             try:
                 holder.input.notice(LeaseExpired(silent_s=silent_s, lease_s=lease.window_s))
             except Exception:  # an input that cannot show the notice must not hide the stop
@@ -227,6 +240,7 @@ class Arbiter:
 
     def _submit(self, handle: _Handle, intent: Intent, now_s: float) -> None:
         if isinstance(intent, StopIntent) and not handle.detached:
+            self._tripped.discard(handle)
             self._release()
             self._forward(intent)
             return
@@ -234,12 +248,17 @@ class Arbiter:
         if isinstance(intent, StopIntent) or (
             isinstance(intent, ContinuousIntent) and intent.is_neutral()
         ):
+            self._tripped.discard(handle)
             # A neutral stick with nothing held is no news; it must not cancel queued steps.
             if self._holding or isinstance(intent, StopIntent):
                 self._release()
                 self._forward(intent)
             return
         if isinstance(intent, ContinuousIntent):
+            if handle in self._tripped:
+                raise InputRefused(
+                    "the dead-man stopped this jog; release the controls and press again"
+                )
             if not self._holding:
                 self._require_can_jog()
             try:
@@ -281,6 +300,7 @@ class Arbiter:
         if handle.detached:
             return
         handle.detached = True
+        self._tripped.discard(handle)
         self._handles.remove(handle)
         log.info("%s input %s detached", handle.input.kind, handle.input.name)
         if handle is not self._controller:
@@ -328,6 +348,7 @@ class Arbiter:
             raise InputRefused(str(exc)) from exc
 
     def _renew(self, window_s: float, now_s: float) -> None:
+        self._graced = False
         if self._lease is None:
             self._lease = Lease(window_s, now_s)
         else:
@@ -358,11 +379,27 @@ class Arbiter:
     def _schedule(self) -> None:
         # One timer per window, not per heartbeat: when it fires early it re-arms itself.
         if self._timer is None and self._lease is not None:
-            self._timer = self._clock().call_at(self._lease.deadline_s(), self._on_timer)
+            self._timer_due_s = self._lease.deadline_s()
+            self._timer = self._clock().call_at(self._timer_due_s, self._on_timer)
 
     def _on_timer(self) -> None:
         self._timer = None
-        if not self.check(self.now_s()):
+        now_s = self.now_s()
+        lease = self._lease
+        if (
+            lease is not None
+            and lease.expired(now_s)
+            and now_s - self._timer_due_s > LATE_TIMER_S
+            and not self._graced
+        ):
+            # The timer ran late, so this process itself stalled (a loaded machine): the
+            # heartbeats of that time may be read but not yet handled (the reader runs after
+            # the timers of the same loop pass). Look again once they are, before stopping.
+            self._graced = True
+            self._timer_due_s = now_s + STALL_GRACE_S
+            self._timer = self._clock().call_at(self._timer_due_s, self._on_timer)
+            return
+        if not self.check(now_s):
             self._schedule()
 
     def _control_changed(self) -> None:
