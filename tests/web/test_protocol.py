@@ -10,6 +10,7 @@ from smoothjog.web.protocol import (
     JogMessage,
     PendantError,
     PendantMessageError,
+    PingMessage,
     RatiosMessage,
     StepMessage,
     StopMessage,
@@ -38,6 +39,7 @@ AXES = ("X", "Y", "Z")
         ('{"type":"step","axis":"Y","dist_mm":0.001}', StepMessage("Y", 0.001)),
         ('{"type":"ratios","ratios":{"Z":0.25}}', RatiosMessage({"Z": 0.25})),
         ('{"type":"take_control"}', TakeControlMessage()),
+        ('{"type":"ping","id":7}', PingMessage(7)),
     ],
 )
 def test_valid_messages_parse(text: str, expected: object) -> None:
@@ -71,6 +73,9 @@ def test_valid_messages_parse(text: str, expected: object) -> None:
         ('{"type":"ratios","ratios":{"X":2}}', "ratios.X must be in (0, 1]"),
         ('{"type":"stop","pad":"' + "x" * 5000 + '"}', "longer than 4096"),
         ("[" * 100_000, "longer than"),
+        ('{"type":"ping"}', "ping id must be a whole number"),
+        ('{"type":"ping","id":-1}', "ping id must be a whole number"),
+        ('{"type":"ping","id":1.5}', "ping id must be a whole number"),
     ],
 )
 def test_invalid_messages_are_refused_in_words(text: str, fragment: str) -> None:

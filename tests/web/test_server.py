@@ -219,7 +219,6 @@ async def test_a_watcher_cannot_jog_and_gets_control_when_the_jog_ends(
     for message in (
         JOG_X,
         {"type": "step", "axis": "X", "dist_mm": 1},
-        {"type": "stop"},
         {"type": "ratios", "ratios": {"Z": 0.5}},
     ):
         await send(second, message)
@@ -232,9 +231,14 @@ async def test_a_watcher_cannot_jog_and_gets_control_when_the_jog_ends(
     await backend.wait_for(lambda: backend.named("jog_continuous"), what="the jog")
     await send(second, {"type": "take_control"})
     assert "holding a jog" in (await next_message(second, "error"))["text"]
+    # A watcher's STOP is the one thing it may send: any pendant's STOP stops the machine.
+    await send(second, {"type": "stop"})
+    await backend.wait_for(lambda: backend.named("stop"), what="the watcher's stop")
 
+    await send(first, JOG_X)
+    await backend.wait_for(lambda: len(backend.named("jog_continuous")) == 2, what="jog again")
     await send(first, {"type": "stop"})
-    await backend.wait_for(lambda: backend.named("stop"), what="the stop")
+    await backend.wait_for(lambda: len(backend.named("stop")) == 2, what="the stop")
     await send(second, {"type": "take_control"})
     assert (await next_message(second, "role"))["role"] == "controller"
     await until_role(first, "watcher")
@@ -395,9 +399,34 @@ async def test_silence_during_a_held_jog_trips_the_deadman(
     with (artifacts / "deadman-server.txt").open("w") as f:
         f.write(f"{delay_s * 1000:.1f} ms after the last heartbeat, window 150 ms\n")
     assert 0.15 <= delay_s < 1.0
-    assert "no heartbeat" in (await next_message(ws, "error"))["text"]
-    assert p.hub.deadman_trips == 1
+    error = await next_message(ws, "error")
+    assert "no heartbeat" in error["text"]
+    assert error["code"] == "deadman"  # the page holds its jog until released on this code
+    # Heartbeats after the trip (the finger still down) do not restart the jog.
+    await send(ws, JOG_X)
+    assert "release the controls and press again" in (await next_message(ws, "error"))["text"]
+    assert len(backend.named("jog_continuous")) == 1
+    await send(ws, {"type": "stop"})
+    await send(ws, JOG_X)
+    await backend.wait_for(lambda: len(backend.named("jog_continuous")) == 2, what="a new press")
+    assert p.hub.deadman_trips >= 1
     await ws.close()
+
+
+async def test_a_ping_is_answered_at_once_for_watchers_too(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    first = await open_ws(http, p)
+    await next_message(first, "role")
+    second = await open_ws(http, p)
+    await next_message(second, "role")
+    for ws, ping_id in ((first, 1), (second, 2**31 - 1)):
+        await send(ws, {"type": "ping", "id": ping_id})
+        assert await next_message(ws, "pong") == {"type": "pong", "id": ping_id}
+    assert p.backend.calls == []
+    await first.close()
+    await second.close()
 
 
 async def test_heartbeats_keep_a_jog_alive_and_release_stops_once(

@@ -67,6 +67,13 @@ class TakeControlMessage:
     """A watcher asks to become the controlling client."""
 
 
+@dataclass(frozen=True)
+class PingMessage:
+    """The page measures the link: the server answers {"type": "pong", "id": id} at once."""
+
+    id: int
+
+
 #: Machine commands the page may ask for, and what each needs beside its name.
 COMMAND_NAMES: Final = (
     "unlock",
@@ -96,7 +103,13 @@ class CommandMessage:
 
 
 ClientMessage = (
-    JogMessage | StopMessage | StepMessage | RatiosMessage | TakeControlMessage | CommandMessage
+    JogMessage
+    | StopMessage
+    | StepMessage
+    | RatiosMessage
+    | TakeControlMessage
+    | CommandMessage
+    | PingMessage
 )
 
 
@@ -178,9 +191,14 @@ def parse_client_message(text: str | bytes, known_axes: Sequence[str]) -> Client
         return TakeControlMessage()
     if kind == "command":
         return _command(data, known_axes)
+    if kind == "ping":
+        raw_id = data.get("id")
+        if isinstance(raw_id, bool) or not isinstance(raw_id, int) or not 0 <= raw_id < 2**31:
+            raise PendantMessageError(f"ping id must be a whole number from 0, got {raw_id!r}")
+        return PingMessage(raw_id)
     raise PendantMessageError(
         f"unknown message type {json.dumps(kind)}; expected jog, stop, step, ratios, "
-        "take_control or command"
+        "take_control, command or ping"
     )
 
 
@@ -259,9 +277,17 @@ def result_message(
     }
 
 
-def error_message(text: str) -> dict[str, object]:
-    """An error in words for the page to show."""
-    return {"type": "error", "text": text}
+def error_message(text: str, *, code: str | None = None) -> dict[str, object]:
+    """An error in words for the page to show; `code` names the ones the page acts on."""
+    message: dict[str, object] = {"type": "error", "text": text}
+    if code is not None:
+        message["code"] = code
+    return message
+
+
+def pong_message(ping_id: int) -> dict[str, object]:
+    """The answer to a ping, sent at once."""
+    return {"type": "pong", "id": ping_id}
 
 
 def dumps(message: Mapping[str, object]) -> str:

@@ -42,6 +42,7 @@ from smoothjog.web.protocol import (
     JogMessage,
     PendantError,
     PendantMessageError,
+    PingMessage,
     RatiosMessage,
     StepMessage,
     StopMessage,
@@ -49,6 +50,7 @@ from smoothjog.web.protocol import (
     dumps,
     error_message,
     parse_client_message,
+    pong_message,
     result_message,
     role_message,
     view_message,
@@ -148,7 +150,7 @@ class WebInput(Input):
             f"jog stopped: no heartbeat from this pendant for {notice.silent_s * 1000:.0f} ms "
             "(weak Wi-Fi or a busy device?)"
         )
-        _spawn(self.hub.send(self, dumps(error_message(text))))
+        _spawn(self.hub.send(self, dumps(error_message(text, code="deadman"))))
 
 
 @dataclass(eq=False)
@@ -245,8 +247,16 @@ class PendantHub:
             return
         handle = page.handle
         assert handle is not None, "a page sends frames only while it runs as an input"
+        if isinstance(message, PingMessage):
+            await self.send(page, dumps(pong_message(message.id)))
+            return
         if isinstance(message, TakeControlMessage):
             await self._take_control(page, handle)
+            return
+        if isinstance(message, StopMessage) and not handle.in_control:
+            # Any page's STOP stops the machine (the arbiter lets a stop through from anyone).
+            with contextlib.suppress(InputRefused):
+                handle.submit(StopIntent())
             return
         if not handle.in_control:
             await self.refuse(

@@ -36,7 +36,7 @@ const pending = new Map();
 const history = [];
 let historyAt = 0;
 
-const conn = new Connection({ onMessage, onOpen, onClose });
+const conn = new Connection({ onMessage, onOpen, onClose, onFrozen, onLink });
 const mixer = new JogMixer((m) => conn.send(m));
 mixer.setSpeed(settings.speedPercent / 100);
 
@@ -125,6 +125,36 @@ function onClose() {
   refresh();
 }
 
+/** The link worker stopped a held jog because this page's own thread stalled past its gate. */
+function onFrozen(silentMs) {
+  mixer.trip();
+  showNotice(t("notice.frozen", { ms: Math.round(silentMs) }));
+}
+
+/** The link's figures, once a second: the round trip, and this page's longest pause. */
+function onLink(figures) {
+  const pill = $("link");
+  if (!figures.connected || figures.rttMs === null) {
+    pill.textContent = "—";
+    pill.className = "pill link";
+    return;
+  }
+  const ms = Math.round(figures.rttMs);
+  pill.textContent = t("link.rtt", { ms });
+  // Good while a round trip fits in a heartbeat period, bad beyond half the dead-man window.
+  const quality = ms <= 40 ? "good" : ms <= 75 ? "slow" : "bad";
+  pill.className = `pill link link-${quality}`;
+  pill.title = t("link.detail", {
+    ms,
+    max: Math.round(figures.rttMaxMs),
+    page: Math.round(figures.worstPageGapMs),
+  });
+  pill.dataset.rttMs = String(ms);
+  pill.dataset.pageGapMs = String(Math.round(figures.worstPageGapMs));
+  pill.dataset.beatGapMs = String(Math.round(figures.worstBeatGapMs));
+  pill.dataset.pageStalls = String(figures.pageStallsOverWindow);
+}
+
 function onMessage(msg) {
   if (msg.type === "view") {
     view = msg;
@@ -133,6 +163,8 @@ function onMessage(msg) {
   } else if (msg.type === "role") {
     onRole(msg);
   } else if (msg.type === "error") {
+    // The server's dead-man stopped the held jog: it must not restart under the finger.
+    if (msg.code === "deadman") mixer.trip();
     showNotice(translateServer(String(msg.text)));
   } else if (msg.type === "result") {
     onResult(msg);
@@ -145,7 +177,7 @@ function onRole(msg) {
   controlled = Boolean(msg.controlled);
   if (Number.isFinite(msg.deadman_s) && msg.deadman_s > 0) {
     // Several heartbeats fit in one dead-man window, so one late timer does not stop the jog.
-    mixer.heartbeatMs = Math.min(40, (msg.deadman_s * 1000) / 4);
+    conn.setWindow(msg.deadman_s * 1000);
   }
   if (role === "controller") sessionStorage.setItem(CONTROLLER_FLAG, "1");
   else if (previous === "controller") sessionStorage.removeItem(CONTROLLER_FLAG);

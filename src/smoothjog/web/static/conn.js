@@ -1,49 +1,67 @@
-// The WebSocket to the pendant server: JSON in and out, reconnecting with a growing pause.
+// The page's side of the link: the WebSocket lives in linkworker.js, this object talks to it.
+//
+// The page pings the worker every PING_MS from its own thread; the worker holds a jog's
+// heartbeat only while those pings come (see linkworker.js for why).
+
+/** How often the page's thread tells the worker it is alive. */
+const PING_MS = 50;
+/** A held jog stops when the page's thread was silent this long (the worker then stops it). */
+export const PAGE_GATE_MS = 300;
 
 export class Connection {
-  constructor({ onMessage, onOpen, onClose }) {
+  constructor({ onMessage, onOpen, onClose, onFrozen = () => {}, onLink = () => {} }) {
     this.onMessage = onMessage;
     this.onOpen = onOpen;
     this.onClose = onClose;
-    this.ws = null;
-    this.retryMs = 500;
+    this.onFrozen = onFrozen;
+    this.onLink = onLink;
+    this.isOpen = false;
+    this.worker = null;
   }
 
   connect() {
     const scheme = location.protocol === "https:" ? "wss:" : "ws:";
     // Same host as the page: the server checks the Origin, and the pairing cookie goes along.
-    const ws = new WebSocket(`${scheme}//${location.host}/ws`);
-    this.ws = ws;
-    ws.addEventListener("open", () => {
-      this.retryMs = 500;
-      this.onOpen();
-    });
-    ws.addEventListener("message", (e) => {
-      let msg;
-      try {
-        msg = JSON.parse(e.data);
-      } catch {
-        return;
+    const url = `${scheme}//${location.host}/ws`;
+    const worker = new Worker(new URL("./linkworker.js", import.meta.url), { type: "module" });
+    this.worker = worker;
+    worker.onmessage = (e) => {
+      const m = e.data;
+      if (m.ev === "open") {
+        this.isOpen = true;
+        this.onOpen();
+      } else if (m.ev === "close") {
+        this.isOpen = false;
+        this.onClose();
+      } else if (m.ev === "message") {
+        this.onMessage(m.msg);
+      } else if (m.ev === "frozen") {
+        this.onFrozen(m.silentMs);
+      } else if (m.ev === "link") {
+        this.onLink(m);
       }
-      this.onMessage(msg);
-    });
-    ws.addEventListener("close", () => {
-      if (this.ws !== ws) return;
-      this.ws = null;
-      this.onClose();
-      setTimeout(() => this.connect(), this.retryMs);
-      this.retryMs = Math.min(this.retryMs * 2, 4000);
-    });
+    };
+    worker.postMessage({ op: "config", gateMs: PAGE_GATE_MS });
+    worker.postMessage({ op: "connect", url });
+    setInterval(() => worker.postMessage({ op: "alive" }), PING_MS);
+  }
+
+  /** The server's dead-man window: the worker repeats a held jog four times within it. */
+  setWindow(windowMs) {
+    const heartbeatMs = Math.min(40, windowMs / 4);
+    if (this.worker) {
+      this.worker.postMessage({ op: "config", heartbeatMs, gateMs: PAGE_GATE_MS, windowMs });
+    }
   }
 
   get open() {
-    return this.ws !== null && this.ws.readyState === WebSocket.OPEN;
+    return this.isOpen;
   }
 
   /** Send one message; false when not connected (the caller's intent is then simply lost). */
   send(message) {
-    if (!this.open) return false;
-    this.ws.send(JSON.stringify(message));
+    if (!this.isOpen || this.worker === null) return false;
+    this.worker.postMessage({ op: "send", msg: message });
     return true;
   }
 }

@@ -1,8 +1,10 @@
 // The jog mixer: sums every input's deflection into one intent and owns the heartbeat and stop.
 //
 // Each input (XY stick, Z stick, keys, gamepad) sets its own contribution; the mixer sends a jog
-// when the sum changes, repeats it every heartbeat while it is non-zero (the server's dead-man
-// stops the machine when the repeats stop), and sends one stop the moment the sum returns to zero.
+// when the sum changes and one stop the moment the sum returns to zero. The link worker repeats
+// the held jog as the heartbeat (linkworker.js). After a trip (the server's dead-man, or the
+// worker's stop for a frozen page) nothing moves until every input is released: a jog never
+// restarts by itself under the user's finger.
 
 import { clamp, round3 } from "./shaping.js";
 
@@ -10,10 +12,10 @@ import { clamp, round3 } from "./shaping.js";
 const MIN_GAP_MS = 20;
 
 export class JogMixer {
-  /** send(message) delivers one JSON message; heartbeatMs is the repeat period while held. */
-  constructor(send, { heartbeatMs = 40 } = {}) {
+  /** send(message) delivers one JSON message. */
+  constructor(send) {
     this.send = send;
-    this.heartbeatMs = heartbeatMs;
+    this.tripped = false;
     this.axes = ["X", "Y", "Z"];
     this.sources = new Map();
     this.enabled = false;
@@ -53,6 +55,17 @@ export class JogMixer {
     if (this.sources.delete(source)) this._update();
   }
 
+  /** The jog was stopped from outside the page: hold nothing until every input is released. */
+  trip() {
+    this._cancelTimer();
+    const was = this.active;
+    this.active = false;
+    this.last = null;
+    this.tripped = true;
+    if (was) this.onActivity(false);
+    this._update();
+  }
+
   /** Drop every contribution and send a stop even if nothing was held (the STOP button). */
   stopAll() {
     this.sources.clear();
@@ -78,6 +91,13 @@ export class JogMixer {
   _update() {
     const t = this.total();
     const moving = this.enabled && Object.values(t).some((v) => v !== 0);
+    if (this.tripped) {
+      if (moving) return;
+      // Released after a trip: the stop also tells the server and the worker it is over.
+      this.tripped = false;
+      this.send({ type: "stop" });
+      return;
+    }
     if (!moving) {
       if (this.active) {
         this.active = false;
@@ -105,12 +125,11 @@ export class JogMixer {
     if (!this.last) return;
     this.send({ type: "jog", axes: { ...this.last }, speed: round3(this.speed) });
     this.lastSentAt = performance.now();
-    this._arm(this.heartbeatMs);
   }
 
   _arm(delayMs) {
     this._cancelTimer();
-    // Each send re-arms the heartbeat, so a held jog repeats every heartbeatMs at most.
+    // A change that came too soon after the last jog is sent when the gap has passed.
     this.timer = setTimeout(() => {
       this.timer = null;
       if (this.active) this._sendJog();
