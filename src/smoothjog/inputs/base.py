@@ -30,6 +30,7 @@ KIND_NOUNS: Final = {
     "gamepad": "gamepad",
     "keyboard": "keyboard",
     "handwheel": "handwheel",
+    "spacemouse": "SpaceMouse",
     "script": "script",
 }
 
@@ -89,7 +90,8 @@ class Input(ABC):
 
     #: Who this is, for logs and messages (e.g. "gamepad Logitech F310", "#2 192.168.1.20").
     name: str
-    #: What it is: "web", "gamepad", "keyboard", "handwheel", "script" (see KIND_NOUNS).
+    #: What it is: "web", "gamepad", "keyboard", "handwheel", "spacemouse", "script"
+    #: (see KIND_NOUNS).
     kind: str
     #: The dead-man window (s) a held continuous jog from this input needs, or None for an
     #: input that cannot go silent mid-jog (a script, a local keyboard that reports key-up).
