@@ -1329,3 +1329,26 @@ def test_an_owed_cancel_looks_for_the_stale_lines_often() -> None:
             h.status("Idle")
     assert len(asked) >= 3
     assert max(b - a for a, b in itertools.pairwise(asked)) <= 0.0155
+
+
+@pytest.mark.parametrize(
+    ("crawl_speed", "choice"),
+    [
+        # From 0.83 mm/s the queued blocks take longer to run out than a cancel and restart.
+        pytest.param(0.01, "cancel", id="from-a-crawl"),
+        # From half speed the queue runs out sooner than a stop and a start: let it run.
+        pytest.param(0.5, "let-run", id="from-half-speed"),
+    ],
+)
+def test_a_speed_up_cancels_only_when_the_slow_queue_would_take_longer(
+    crawl_speed: float, choice: str
+) -> None:
+    h = EngineHarness(rx_bytes=1024)
+    h.intent(ContinuousIntent({"X": -1.0}, crawl_speed))
+    while h.t < 0.3:
+        h.run(h.t + 0.002)
+    h.intent(ContinuousIntent({"X": -1.0}, 1.0))
+    h.poll()
+    choices = [c for _, c, _, _ in h.engine.stats.turn_choices]
+    assert choices == [choice]
+    assert h.engine.phase is (Phase.STOPPING if choice == "cancel" else Phase.JOGGING)

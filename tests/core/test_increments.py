@@ -75,7 +75,8 @@ def test_committed_time_of_degenerate_blocks_is_the_full_window(block_s: float) 
     ("queued_mm", "speed", "new_speed", "reverse", "expected_s"),
     [
         pytest.param(0.0, 0.0, V, True, V / A, id="from-rest"),
-        pytest.param(10.0, V / 2, V, False, (V / 2) / A, id="speeding-up"),
+        # The 10 mm queued at V/2 run at V/2 first: a block is never run above its own feed.
+        pytest.param(10.0, V / 2, V, False, 10.0 / (V / 2) + (V / 2) / A, id="speeding-up"),
         pytest.param(
             50.0,
             V,

@@ -138,6 +138,8 @@ def let_run_turn_s(
 
     For a reversal the machine cruises until it must brake, stops at the end of the queue, then
     accelerates the other way. For a slowdown it brakes just in time to enter the slower blocks.
+    For a speed-up it runs the queued blocks at their own feed (the planner never goes faster
+    than a block's feed within it), then accelerates in the first faster block.
     """
     if speed_mm_s <= 0.0:
         return new_speed_mm_s / accel_mm_s2
@@ -147,7 +149,7 @@ def let_run_turn_s(
     dv = abs(speed_mm_s - new_speed_mm_s)
     brake_mm = abs(speed_mm_s**2 - new_speed_mm_s**2) / (2.0 * accel_mm_s2)
     if new_speed_mm_s >= speed_mm_s:
-        return dv / accel_mm_s2
+        return queued_mm / speed_mm_s + dv / accel_mm_s2
     cruise_mm = max(queued_mm - brake_mm - stop_distance_mm(new_speed_mm_s, accel_mm_s2), 0.0)
     return cruise_mm / speed_mm_s + dv / accel_mm_s2
 

@@ -256,6 +256,11 @@ class EngineLimits:
 
 
 # ------------------------------------------------------------------------------------ state
+#: How much sooner (s) a cancel-and-restart must reach a faster speed than letting the queued
+#: slower blocks run out before the engine cancels for a speed-up alone.
+SPEEDUP_CANCEL_MARGIN_S = 0.15
+
+
 class Phase(Enum):
     """What the engine is doing."""
 
@@ -1253,7 +1258,11 @@ class Jogger:
             return
         cos = sum(a * b for a, b in zip(previous.unit_vec, new.unit_vec, strict=True))
         slower = new.speed_mm_s < 0.8 * previous.speed_mm_s
-        if cos > 0.5 and not slower:
+        # A speed-up from a crawl: the slow blocks queued must run out at their own feed first,
+        # which at a few mm/s can take longer than stopping and starting again (a stick or a
+        # shuttle ring pushed from the edge of its deadzone to full).
+        faster = new.speed_mm_s > 1.25 * previous.speed_mm_s
+        if cos > 0.5 and not slower and not faster:
             return
         reverse = cos <= 0.5
         accel = min(previous.accel_mm_s2, new.accel_mm_s2)
@@ -1268,7 +1277,10 @@ class Jogger:
             idle_delay_s=self.limits.idle_delay_s,
             round_trip_s=self._rtt_s,
         )
-        choice = "cancel" if cancel < let_run else "let-run"
+        # A cancel also stops the machine for the handshake: for a speed-up alone it must win
+        # clearly, or a stick sweeping smoothly up from a reversal would stutter for nothing.
+        margin_s = SPEEDUP_CANCEL_MARGIN_S if (cos > 0.5 and not slower) else 0.0
+        choice = "cancel" if cancel + margin_s < let_run else "let-run"
         self.stats.turn_choices.append((now_s, choice, let_run, cancel))
         if choice == "cancel":
             self._begin_stop(now_s)
