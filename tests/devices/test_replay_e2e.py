@@ -120,3 +120,52 @@ def test_input_replay_errors_are_sentences(
     assert "does not exist" in capsys.readouterr().err
     assert main(["jog", "--input-replay", str(FIXTURES / "whb04b" / "step_37.hid")]) == 2
     assert "needs --input-kind" in capsys.readouterr().err
+
+
+def _config(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "devices.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_a_shuttle_ring_held_then_centred_jogs_and_stops(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    start = _start(capsys, tmp_path)
+    # The homed router has 1 mm of room in +X: the ring is read the other way round.
+    config = _config(tmp_path, '[[device]]\nkind = "shuttle"\ninvert = true\n')
+    ring = str(FIXTURES / "shuttle" / "ring_hold.hid")
+    code, out, end = _replay(
+        capsys, "--config", config, "--input-replay", ring, "--input-kind", "shuttle"
+    )
+    assert code == 0, out
+    moved = start[0] - end[0]
+    # About 1.5 s at full speed (83.3 mm/s) plus the ramps, then a stop at the centre.
+    assert 100.0 < moved < 150.0
+    assert end[1:] == start[1:]
+
+
+def test_a_spacemouse_push_jogs_and_its_release_stops(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    start = _start(capsys, tmp_path)
+    config = _config(tmp_path, '[[device]]\nkind = "spacemouse"\naxes = { X = "-x" }\n')
+    push = str(FIXTURES / "spacemouse" / "push_x.hid")
+    code, out, end = _replay(
+        capsys, "--config", config, "--input-replay", push, "--input-kind", "spacemouse"
+    )
+    assert code == 0, out
+    moved = start[0] - end[0]
+    # About 1 s near full speed (83.3 mm/s) plus the ramps, then the release stops it.
+    assert 60.0 < moved < 110.0
+    assert end[1:] == start[1:]
+
+
+def test_an_encoder_knob_turns_the_handwheel(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    start = _start(capsys, tmp_path)
+    knob = str(FIXTURES / "knob" / "rel-dial.txt")
+    code, out, end = _replay(capsys, "--input-replay", knob, "--input-kind", "knob")
+    assert code == 0, out
+    assert end != start
