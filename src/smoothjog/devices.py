@@ -32,6 +32,7 @@ from smoothjog.host import Host
 from smoothjog.inputs.device import Decoder, DeviceCommand, DeviceInfo, DeviceItem, DisplayView
 from smoothjog.inputs.devinput import DeviceInput, DeviceSource, NoticeSink, RecordedSource
 from smoothjog.inputs.discovery import (
+    NAMED_ONLY_KINDS,
     PERMISSION_FIX,
     FoundDevice,
     choose,
@@ -53,6 +54,12 @@ def check_device_configs(configs: Sequence[DeviceConfig]) -> None:
     """Build each configured decoder once, so a bad option fails at start, naming its key."""
     for entry in configs:
         cls = decoder_named(entry.kind, where=f"{entry.source}: [{entry.section}] kind")
+        if cls.name in NAMED_ONLY_KINDS and entry.match is None:
+            # Every keyboard would be grabbed, the one the user types on included.
+            raise ConfigError(
+                f"{entry.source}: [{entry.section}] match is missing: a {cls.name} table must "
+                'name its device, e.g. match = "USB Keypad" (see `smoothjog devices`)'
+            )
         cls(DeviceInfo(name="check"), entry.table(), ALL_AXES)
 
 
@@ -208,10 +215,12 @@ class DeviceManager:
         self.started: list[DeviceInput] = []
 
     def _tell(self, text: str) -> None:
-        log.warning("%s", text)
-        if self._notices is not None:
-            with contextlib.suppress(Exception):
-                self._notices(text)
+        if self._notices is None:
+            log.warning("%s", text)
+            return
+        log.info("%s", text)
+        with contextlib.suppress(Exception):
+            self._notices(text)
 
     def wanted(self, found: Sequence[FoundDevice]) -> list[FoundDevice]:
         """The nodes to open now: wished for or configured, one per physical device."""
@@ -284,6 +293,11 @@ class DeviceManager:
                 self._tell_once(device.path, str(exc))
                 return
         self._told.pop(device.path, None)
+        if device.transport == "evdev" and not getattr(source, "grabbed", True):
+            self._tell(
+                f"{device.path}: another program has grabbed it, so its events may not reach "
+                "smoothjog (is spacenavd or a desktop session using it?)"
+            )
         device_input = DeviceInput(
             decoder,
             source,

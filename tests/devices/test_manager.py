@@ -133,6 +133,9 @@ def test_a_bad_device_option_is_refused_at_start_naming_the_key() -> None:
     config = parse_config('[[device]]\nkind = "joystick"\n', "pi.toml")
     with pytest.raises(ConfigError, match="unknown device kind 'joystick'"):
         check_device_configs(config.devices)
+    config = parse_config('[[device]]\nkind = "keyboard"\n', "pi.toml")
+    with pytest.raises(ConfigError, match="a keyboard table must name its device"):
+        check_device_configs(config.devices)
     with pytest.raises(ConfigError, match="kind is missing"):
         parse_config('[[device]]\nmatch = "pad"\n', "pi.toml")
 

@@ -73,12 +73,19 @@ def test_frames_close_on_syn_report_or_a_new_time_and_scan_codes_in_hex_are_drop
     ]
 
 
-def test_syn_dropped_gives_a_resync_frame_of_the_state_seen() -> None:
+@pytest.mark.parametrize(
+    "dropped_line",
+    [
+        "Event: time 1.1, >>>>>>>>>>>>>> SYN_DROPPED <<<<<<<<<<<<",  # as evtest prints it
+        "Event: time 1.1, -------------- SYN_DROPPED ------------",
+    ],
+)
+def test_syn_dropped_gives_a_resync_frame_of_the_state_seen(dropped_line: str) -> None:
     lines = [
         "Event: time 1.0, type 3 (EV_ABS), code 0 (ABS_X), value 100",
         "Event: time 1.0, type 1 (EV_KEY), code 304 (BTN_SOUTH), value 1",
-        "Event: time 1.0, -------------- SYN_REPORT ------------",
-        "Event: time 1.1, -------------- SYN_DROPPED ------------",
+        "Event: time 1.0, -------------- SYN_REPORT ------------   # a comment",
+        dropped_line,
         "Event: time 1.1, type 3 (EV_ABS), code 0 (ABS_X), value 999",
         "Event: time 1.1, -------------- SYN_REPORT ------------",
     ]

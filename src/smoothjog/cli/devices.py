@@ -12,7 +12,7 @@ from importlib import resources
 from typing import Any
 
 from smoothjog.inputs.discovery import UDEV_RULES_NAME, FoundDevice, choose, scan
-from smoothjog.inputs.kinds import DECODERS
+from smoothjog.inputs.kinds import DECODERS, KIND_NAMES
 
 
 def register(subparsers: Any) -> None:
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if not shown:
         print(
             f"{len(found)} input node(s) found, none of a kind smoothjog drives "
-            "(gamepad, keyboard, knob, shuttle, spacemouse, whb04b); `--all` lists them"
+            f"({', '.join(KIND_NAMES)}); `--all` lists them"
         )
         return 0
     chosen = {d.path for d in choose(found, ["auto", "keyboard"])}

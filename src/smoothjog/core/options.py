@@ -34,6 +34,11 @@ class Table:
         self._read.add(key)
         return self.data.get(key)
 
+    def raw(self, key: str) -> Any:
+        """The value of key as written (None when absent), marked read: for a getter of the
+        caller's own (a list of names, a list of any length), which checks it itself."""
+        return self._take(key)
+
     def number(
         self,
         key: str,

@@ -11,7 +11,7 @@ Actions:
 - an `Intent` (core/intents.py), handed to the arbiter as it is;
 - a `DeviceCommand`, a machine command by the pendant's names (unlock, home, reset, zero,
   goto_zero, override) plus hold/resume, run by MachineControl beside the jog;
-- a `DeviceNotice`, a sentence for the user (logged; shown on the pendant).
+- a `DeviceNotice`, a sentence for the user (printed by the command that runs the device).
 
 Rules every decoder follows (the `DeviceInput` relies on them):
 - `feed` and `tick` never raise for anything a device can send: unknown codes, short or long

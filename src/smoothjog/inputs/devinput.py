@@ -250,12 +250,14 @@ class DeviceInput(Input):
             await asyncio.sleep(self._display_period_s)
 
     def _tell(self, text: str) -> None:
-        log.warning("%s", text)
-        if self._notices is not None:
-            try:
-                self._notices(text)
-            except Exception:  # a notice that cannot be shown must not stop the device
-                log.exception("could not show a device notice")
+        if self._notices is None:
+            log.warning("%s", text)
+            return
+        log.info("%s", text)
+        try:
+            self._notices(text)
+        except Exception:  # a notice that cannot be shown must not stop the device
+            log.exception("could not show a device notice")
 
 
 def _starts_motion(intent: Intent) -> bool:

@@ -76,7 +76,8 @@ class EvdevSource:
                 device.grab()
                 self.grabbed = True
             except OSError:
-                # Another program holds it; reading still works, the events are shared.
+                # Another program grabbed it first (spacenavd, a desktop): its events go there,
+                # not here. Said by whoever opened it (grabbed stays False).
                 self.grabbed = False
         self._closed = False
 

@@ -270,9 +270,9 @@ class GamepadDecoder(Decoder):
 
     @staticmethod
     def _read_speeds(options: Table) -> tuple[float, ...]:
-        if "speeds" not in options.data:
+        raw = options.raw("speeds")
+        if raw is None:
             return DEFAULT_SPEEDS
-        raw = options.data["speeds"]
         if not isinstance(raw, list) or not 1 <= len(raw) <= len(ALL_AXES):
             raise options.error(
                 "speeds",

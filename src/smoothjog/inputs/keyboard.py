@@ -162,8 +162,7 @@ DEFAULT_TAP_S: Final = 0.25
 
 def list_option(options: Table, key: str) -> list[Any] | None:
     """The raw list under key, marked read (None when absent); the items are the caller's."""
-    # Table has no getter for an optional list yet, and only its _take marks a key as read.
-    value = options._take(key)
+    value = options.raw(key)
     if value is None:
         return None
     if not isinstance(value, list) or not value:

@@ -17,6 +17,9 @@ absolute ranges; without it the decoder's defaults apply):
     Event: time 1550548790.247581, type 3 (EV_ABS), code 0 (ABS_X), value 6126
     Event: time 1550548790.247581, -------------- SYN_REPORT ------------
 
+evtest marks lost events as `>>>>>>>>>>>>>> SYN_DROPPED <<<<<<<<<<<<`; that line, and a `#`
+comment (a whole line, or after an Event line), are read too.
+
 hidraw, one report per line: seconds since the start, then the report's bytes in hex (spaces
 allowed); `#` starts a comment. hid-recorder's `E: SECONDS.MICROS LENGTH BYTES` lines (and its
 `N:` name and `I:` bus/vendor/product lines) are read too.
@@ -65,7 +68,7 @@ class HidRecording:
 _EVENT = re.compile(
     r"^Event:\s*time\s+(?P<t>-?\d+(?:\.\d+)?),\s*"
     r"(?:type\s+(?P<type>\d+)\s*(?:\([^)]*\))?,\s*code\s+(?P<code>\d+)\s*(?:\([^)]*\))?,\s*"
-    r"value\s+(?P<value>-?[0-9a-fA-F]+)|-+\s*(?P<syn>SYN_[A-Z_]+)\s*-+)\s*$"
+    r"value\s+(?P<value>-?[0-9a-fA-F]+)|[-+>]+\s*(?P<syn>SYN_[A-Z_]+)\s*[-+<]+)\s*$"
 )
 _DEVICE_ID = re.compile(
     r"^Input device ID:\s*bus\s+0x(?P<bus>[0-9a-fA-F]+)\s+vendor\s+0x(?P<vendor>[0-9a-fA-F]+)"
@@ -121,7 +124,11 @@ def parse_evtest(lines: Iterable[str], *, source: str = "<evtest>") -> EvdevReco
     t0: float | None = None
     last_t = float("-inf")
     for number, raw in enumerate(lines, start=1):
-        line = raw.split("#", 1)[0].strip() if raw.lstrip().startswith("#") else raw.strip()
+        # A comment is a whole line, or follows an Event line (a device name may hold a #).
+        stripped = raw.strip()
+        if stripped.startswith("#"):
+            continue
+        line = stripped.split("#", 1)[0].strip() if stripped.startswith("Event:") else stripped
         if not line:
             continue
         where = f"{source}:{number}"

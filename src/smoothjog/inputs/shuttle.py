@@ -559,7 +559,7 @@ def _name(button: _Button) -> str:
 
 def _number_list(options: Table, key: str, at_least: int, at_most: int, what: str) -> Any:
     """The raw list under key (None when absent), its length checked; marks the key read."""
-    raw: Any = options.data.get(key)
+    raw: Any = options.raw(key)
     if raw is None:
         return None
     count = f"{at_least}" if at_least == at_most else f"{at_least} to {at_most}"
