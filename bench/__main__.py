@@ -1,4 +1,4 @@
-"""`python -m bench [jog|fuzz|micro|sim|cpu] [options]`: smoothjog's benchmark commands."""
+"""`python -m bench [jog|fuzz|micro|sim|cpu|deadman] [options]`: smoothjog's benchmark commands."""
 
 from __future__ import annotations
 
@@ -30,6 +30,10 @@ def main() -> int:
         from bench import cpu
 
         return cpu.main(rest)
+    if name == "deadman":
+        from bench import deadman
+
+        return deadman.main(rest)
     if name == "all":
         from bench import bench_sim_speed, jog, micro
 
@@ -37,7 +41,7 @@ def main() -> int:
         code |= micro.main([])
         code |= bench_sim_speed.main()
         return code
-    print(f"unknown benchmark {name!r}: use jog, fuzz, micro, sim or cpu", file=sys.stderr)
+    print(f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu or deadman", file=sys.stderr)
     return 2
 
 
