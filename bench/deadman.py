@@ -1,7 +1,8 @@
 """`python -m bench deadman [--minutes 5] [--rounds 1]`: the pendant's dead-man on a busy machine.
 
 Runs the browser test tests/web/test_deadman_load.py (real headless Chromium, the real page and
-server, two processes spinning on a core each) with a longer hold, once per round, and prints
+server, two processes spinning on a core each, the page's own thread made to stall 250 ms every
+2 s) with a longer hold, once per round, and prints
 what each round measured: dead-man trips (the goal is 0), the worst gap between heartbeats at
 the server against its 150 ms window, and how long the page's own thread paused, with the count
 of pauses longer than the window (each would have stopped the jog if the heartbeat still came
@@ -66,7 +67,7 @@ def main(argv: list[str]) -> int:
             print(tail, file=sys.stderr)
             continue
         rows.append(f"| {n} | {ARTIFACT.read_text().strip()} | {wall_s:.0f} s |")
-    machine = f"{os.cpu_count()} CPUs, load average before the last round: {os.getloadavg()[0]:.2f}"
+    machine = f"{os.cpu_count()} CPUs, load average at the end: {os.getloadavg()[0]:.2f}"
     report = "\n".join(
         [
             "# Dead-man under CPU load",
@@ -76,7 +77,8 @@ def main(argv: list[str]) -> int:
             "- Browser: Debian's Chromium, headless, through Playwright; the pendant page and"
             " server of this checkout against the recording backend (no controller: the"
             " dead-man is the page's and the server's); two `python -c 'while True: pass'`"
-            " processes for the whole hold.",
+            " processes for the whole hold, and a 250 ms busy loop on the page's own thread"
+            " every 2 s.",
             f"- Machine: {machine}.",
             "",
             "| round | measured | wall time |",

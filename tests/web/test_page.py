@@ -269,7 +269,7 @@ async def test_closing_the_tab_or_freezing_it_mid_jog_stops_within_the_window(
     pendant: StartPendant, open_page: OpenPage, artifacts: Path
 ) -> None:
     p, backend, page = await start(pendant, open_page)
-    # Frozen page: its own thread stops; the link worker sees no ping for 300 ms (conn.js
+    # Frozen page: its own thread stops; the link worker sees no ping for 350 ms (conn.js
     # PAGE_GATE_MS), sends the stop itself and holds nothing more until the page releases.
     await page.keyboard.down("ArrowLeft")
     await backend.wait_for(lambda: len(backend.jogs()) >= 3, what="a held jog")
@@ -286,7 +286,7 @@ async def test_closing_the_tab_or_freezing_it_mid_jog_stops_within_the_window(
     from_freeze_ms = (stop_s - t_s) * 1000
     assert p.hub.deadman_trips == 0  # the worker stopped it before the server's window ran out
     assert frozen_ms < 200  # within 200 ms of the last heartbeat
-    assert 300 <= from_freeze_ms < 1000
+    assert 350 <= from_freeze_ms < 1000
     await freeze
     # The key is still down when the page wakes: the jog must not restart by itself.
     await asyncio.sleep(0.3)
@@ -306,7 +306,7 @@ async def test_closing_the_tab_or_freezing_it_mid_jog_stops_within_the_window(
     assert closed_ms < 1000
     line = (
         f"frozen page: stop {frozen_ms:.1f} ms after the last heartbeat, {from_freeze_ms:.0f} ms "
-        f"after the freeze began (page gate 300 ms); "
+        f"after the freeze began (page gate 350 ms); "
         f"closed tab: stop {closed_ms:.1f} ms after close() was called"
     )
     print(line)

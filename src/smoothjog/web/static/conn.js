@@ -3,10 +3,11 @@
 // The page pings the worker every PING_MS from its own thread; the worker holds a jog's
 // heartbeat only while those pings come (see linkworker.js for why).
 
-/** How often the page's thread tells the worker it is alive. */
-const PING_MS = 50;
-/** A held jog stops when the page's thread was silent this long (the worker then stops it). */
-export const PAGE_GATE_MS = 300;
+/** How often the page's thread tells the worker it is alive (a stall's gap is it plus this). */
+const PING_MS = 20;
+/** A held jog stops when the page's thread was silent this long (the worker then stops it):
+ * above the 150-300 ms stalls of a busy device, short enough that a frozen page stops soon. */
+export const PAGE_GATE_MS = 350;
 
 export class Connection {
   constructor({ onMessage, onOpen, onClose, onFrozen = () => {}, onLink = () => {} }) {
@@ -46,9 +47,9 @@ export class Connection {
     setInterval(() => worker.postMessage({ op: "alive" }), PING_MS);
   }
 
-  /** The server's dead-man window: the worker repeats a held jog four times within it. */
+  /** The server's dead-man window: the worker repeats a held jog five times within it. */
   setWindow(windowMs) {
-    const heartbeatMs = Math.min(40, windowMs / 4);
+    const heartbeatMs = Math.min(30, windowMs / 5);
     if (this.worker) {
       this.worker.postMessage({ op: "config", heartbeatMs, gateMs: PAGE_GATE_MS, windowMs });
     }
