@@ -1,4 +1,4 @@
-"""`python -m bench [jog|fuzz|micro|sim|cpu|deadman] [options]`: smoothjog's benchmark commands."""
+"""`python -m bench NAME [options]`: the benchmarks (jog fuzz micro sim cpu deadman stopat)."""
 
 from __future__ import annotations
 
@@ -30,6 +30,10 @@ def main() -> int:
         from bench import cpu
 
         return cpu.main(rest)
+    if name == "stopat":
+        from bench import stopat
+
+        return stopat.main(rest)
     if name == "deadman":
         from bench import deadman
 
@@ -41,7 +45,10 @@ def main() -> int:
         code |= micro.main([])
         code |= bench_sim_speed.main()
         return code
-    print(f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu or deadman", file=sys.stderr)
+    print(
+        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, deadman or stopat",
+        file=sys.stderr,
+    )
     return 2
 
 
