@@ -8,12 +8,19 @@ ideal in-process wire. Positions are the controller's own MPos at the end.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
 import pytest
 
 from smoothjog.cli import main
+from smoothjog.devices import load_device_replay
+from smoothjog.inputs.device import HidReport
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile
+from smoothjog.sim.rig import SimRig
+from smoothjog.virtual import VirtualHost
 
 FIXTURES = Path(__file__).parent / "fixtures"
 _MPOS = re.compile(r"final state\s+(\w+) at MPos (-?[\d.]+), (-?[\d.]+), (-?[\d.]+)")
@@ -169,3 +176,45 @@ def test_an_encoder_knob_turns_the_handwheel(
     code, out, end = _replay(capsys, "--input-replay", knob, "--input-kind", "knob")
     assert code == 0, out
     assert end != start
+
+
+def test_a_whb04b_switched_off_mid_move_stops_short_of_what_was_turned(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    start = _start(capsys, tmp_path)
+    wheel = str(FIXTURES / "whb04b" / "sleep_mid_move.hid")
+    code, out, end = _replay(capsys, "--input-replay", wheel, "--input-kind", "whb04b")
+    assert code == 0, out
+    moved = start[0] - end[0]
+    # 50 detents of 1 mm were turned; the sleep report 0.3 s after the last stops the rest
+    # (and its 0x81 byte is not read as 127 more detents).
+    assert 5.0 < moved < 40.0
+    assert "switched off or asleep" in out
+
+
+def test_whb04b_velocity_mode_stops_within_the_stopping_distance_of_the_last_detent() -> None:
+    # The replay's own harness on the host the command uses, to read the simulator's trace.
+    replay = load_device_replay(str(FIXTURES / "whb04b" / "velocity_spin.hid"), "whb04b")
+    last_detent_s = max(r.t_s for r in replay.items if isinstance(r, HidReport) and r.data[6])
+    rig = SimRig(GrblFirmware(get_firmware_profile("grbl"), "hobby-router"))
+    vh = VirtualHost(rig)
+    try:
+        vh.handshake()
+        t_play_s = vh.now_s  # the recording's 0 on the loop's (and the simulator's) clock
+        said = vh._run(replay.play(vh.host))
+        assert vh.run_until_idle(10.0)
+    finally:
+        vh.close()
+    wheel_stopped_s = t_play_s + last_detent_s
+    after_mm = 0.0
+    for seg in rig.trace:
+        if seg.t1_s <= wheel_stopped_s:
+            continue
+        share = (seg.t1_s - max(seg.t0_s, wheel_stopped_s)) / (seg.t1_s - seg.t0_s)
+        after_mm += share * math.dist(seg.start_mm, seg.end_mm)
+    # 100 % on the selector is X's full rate, 5000 mm/min, at 500 mm/s^2.
+    v_mm_s = 5000 / 60
+    assert after_mm <= v_mm_s**2 / (2 * 500)
+    moved_mm = sum(math.dist(seg.start_mm, seg.end_mm) for seg in rig.trace)
+    assert 0.0 < moved_mm <= 40 * 0.05 + 1e-9
+    assert any("intents" in line and "0 refused" in line for line in said), said
