@@ -41,11 +41,23 @@ def test_the_default_notice_is_logged_in_words(caplog: pytest.LogCaptureFixture)
 
 @pytest.mark.parametrize(
     ("kind", "noun"),
-    [("web", "pendant"), ("gamepad", "gamepad"), ("handwheel", "handwheel"), ("cncjs", "input")],
+    [
+        ("web", "pendant"),
+        ("gamepad", "gamepad"),
+        ("handwheel", "handwheel"),
+        ("spacemouse", "SpaceMouse"),
+        ("cncjs", "input"),
+    ],
 )
 def test_messages_name_an_input_by_its_kind(kind: str, noun: str) -> None:
     assert kind_noun(kind) == noun
 
 
 def test_every_documented_kind_has_a_noun() -> None:
-    assert set(KIND_NOUNS) == {"web", "gamepad", "keyboard", "handwheel", "script"}
+    assert set(KIND_NOUNS) == {"web", "gamepad", "keyboard", "handwheel", "spacemouse", "script"}
+
+
+def test_every_device_decoder_is_of_a_kind_with_a_noun() -> None:
+    from smoothjog.inputs.kinds import DECODERS
+
+    assert {d.kind for d in DECODERS} <= set(KIND_NOUNS)
