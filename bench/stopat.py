@@ -20,7 +20,7 @@ from smoothjog.sim.rig import SimRig
 from smoothjog.virtual import VirtualHost
 
 
-def _one(machine: str, speed: float, hold_s: float) -> float:
+def release_miss_mm(machine: str, speed: float, hold_s: float) -> float:
     """Predicted X minus rest X (mm) for a jog toward -X released after hold_s."""
     rig = SimRig(GrblFirmware(get_firmware_profile("grbl"), load_machine_profile(machine)))
     vh = VirtualHost(rig)
@@ -60,7 +60,7 @@ def main(argv: list[str]) -> int:
     for machine in args.machines.split(","):
         for speed in (float(s) for s in args.speeds.split(",")):
             errs = [
-                _one(machine, speed, args.hold_s + k * 0.09 / args.phases)
+                release_miss_mm(machine, speed, args.hold_s + k * 0.09 / args.phases)
                 for k in range(args.phases)
             ]
             worst = max(errs, key=abs)

@@ -246,3 +246,15 @@ def test_point_at_on_an_empty_path_is_its_end() -> None:
     assert track.point_at(5.0) == (0.0, 0.0, 0.0)
     track.drop()
     assert track.point_at(5.0) == ()
+
+
+def test_stop_point_counts_only_what_short_blocks_let_the_firmware_commit() -> None:
+    # Blocks of 10.5 ms are cut into 10 + 0.5 ms segments, so five prepared segments hold at
+    # most 31 ms (increments.committed_s), not the 50 ms the queue is sized for.
+    track = tracker()
+    for i in range(40):
+        add(track, ((i + 1) * 0.525, 0.0, 0.0))  # 0.525 mm at 50 mm/s: 10.5 ms each
+    track.x_est_mm = 2.0
+    track.v_est_mm_s = 50.0
+    committed_s = 0.031
+    assert track.stop_point_mm() == pytest.approx((2.0 + 50.0 * committed_s + 2.5, 0.0, 0.0))

@@ -352,7 +352,11 @@ class PathTracker:
         """Where the machine would come to rest if the jog were released now (path not empty)."""
         v = self.v_est_mm_s
         seg = self.seg_at(self.x_est_mm) or self.path[-1]
-        brake = v * self.committed_s + v * v / (2.0 * seg.accel_mm_s2) if v > 0 else 0.0
+        # The segments the firmware has committed are cut at block ends: with the engine's
+        # short blocks they hold ~31 ms, not the 50 ms of five full segments (committed_s is
+        # the worst case the queue is sized for; this is where the machine will really stop).
+        committed = min(inc.committed_s(self.longest_queued_s(0.0)), self.committed_s)
+        brake = v * committed + v * v / (2.0 * seg.accel_mm_s2) if v > 0 else 0.0
         return self.point_at(min(self.x_est_mm + brake, self.length_mm()))
 
     def tracking_error(self, mpos: Vec, *, cancelled: bool) -> tuple[float, float]:
