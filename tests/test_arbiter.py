@@ -706,3 +706,15 @@ async def test_the_running_loop_is_the_default_clock_and_runs_the_timer() -> Non
     await asyncio.wait_for(sink.stopped.wait(), 5.0)  # the loop's timer trips the lease
     assert arbiter.trips == 1
     assert sink.intents == [JOG, STOP]
+
+
+def test_an_announcement_reaches_every_notice_listener_even_past_a_broken_one(rig: Rig) -> None:
+    heard: list[str] = []
+
+    def broken(text: str) -> None:
+        raise RuntimeError("cannot show")
+
+    rig.arbiter.add_notice_listener(broken)
+    rig.arbiter.add_notice_listener(heard.append)
+    rig.arbiter.announce("whb04b: handwheel asleep")
+    assert heard == ["whb04b: handwheel asleep"]

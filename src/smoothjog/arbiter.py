@@ -146,6 +146,7 @@ class Arbiter:
         self._lease: Lease | None = None
         self._timer: Cancellable | None = None
         self._listeners: list[Callable[[], None]] = []
+        self._notice_listeners: list[Callable[[str], None]] = []
         #: How many times the dead-man lease ran out and stopped the machine.
         self.trips = 0
         #: Inputs whose held jog the dead-man stopped and that have not released since.
@@ -183,6 +184,18 @@ class Arbiter:
     def add_listener(self, callback: Callable[[], None]) -> None:
         """Call callback (no arguments) whenever the controlling input changes."""
         self._listeners.append(callback)
+
+    def add_notice_listener(self, callback: Callable[[str], None]) -> None:
+        """Call callback with every sentence an input announces for all to see."""
+        self._notice_listeners.append(callback)
+
+    def announce(self, text: str) -> None:
+        """Tell every notice listener (the pendant's pages) something about an input."""
+        for callback in list(self._notice_listeners):
+            try:
+                callback(text)
+            except Exception:  # a listener that cannot show it must not stop the announcer
+                log.exception("an arbiter notice listener failed")
 
     def now_s(self) -> float:
         """The arbiter's clock."""

@@ -529,3 +529,22 @@ def test_lan_banner_shows_the_token_url_and_a_qr_code() -> None:
     assert format_banner(8765, host="127.0.0.1", token=None, lan_address=None) == (
         "smoothjog pendant: http://127.0.0.1:8765/\n"
     )
+
+
+async def test_a_device_announcement_reaches_every_page(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    first = await open_ws(http, p)
+    await next_message(first, "role")
+    second = await open_ws(http, p)
+    await next_message(second, "role")
+    p.hub.arbiter.announce("gamepad Pad: unplugged or asleep")
+    for ws in (first, second):
+        assert await next_message(ws, "error") == {
+            "type": "error",
+            "text": "gamepad Pad: unplugged or asleep",
+            "code": "device",
+        }
+    await first.close()
+    await second.close()

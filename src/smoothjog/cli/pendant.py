@@ -98,8 +98,10 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_serve(link, config, args, connection.timeout_s))
 
 
-def _print_notice(text: str) -> None:
+def _print_notice(text: str, arbiter: Arbiter) -> None:
+    """A device's sentence: on stderr, and on every page of the pendant."""
     print(f"smoothjog: {text}", file=sys.stderr, flush=True)
+    arbiter.announce(text)
 
 
 def _print_event(event: EngineEvent) -> None:
@@ -147,7 +149,7 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
                 axes=lambda: session.model.axis_letters,
                 commands=MachineCommands(backend.control),
                 view=machine_view(backend.control),
-                notices=_print_notice,
+                notices=lambda text: _print_notice(text, arbiter),
             )
             tasks.append(asyncio.create_task(manager.run()))
         try:

@@ -176,6 +176,7 @@ class PendantHub:
                 "pass e.g. deadman_s=0.15 to create_app"
             )
         self.arbiter.add_listener(self._control_changed)
+        self.arbiter.add_notice_listener(self._announce)
 
     @property
     def controller(self) -> WebInput | None:
@@ -213,6 +214,12 @@ class PendantHub:
             self.clients.remove(page)
         log.info("pendant client %s disconnected", page.name)
         await self._flush_roles()
+
+    def _announce(self, text: str) -> None:
+        # A device's sentence (unplugged, asleep, refused): every page shows it.
+        message = dumps(error_message(text, code="device"))
+        for page in list(self.clients):
+            _spawn(self.send(page, message))
 
     def _control_changed(self) -> None:
         # The arbiter calls this synchronously; the pages hear of it as soon as the loop can.
