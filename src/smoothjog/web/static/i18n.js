@@ -292,11 +292,12 @@ export const STRINGS = {
   },
 };
 
-// Grbl's alarm and error codes (firmware-facts §5.6, §5.7): what happened and what to do.
+// Grbl's alarm and error codes (firmware-facts §5.6, §5.7) by number: what happened, and for
+// some alarms what to do ([what, todo]); the fix hints the server sends are patterns below.
 const ALARMS_ZH = {
-  1: "硬限位触发：位置可能已丢失，请复位后重新回零",
-  2: "软限位：目标超出行程，位置仍可信，解锁即可",
-  3: "运动中复位：位置可能已丢失，请重新回零",
+  1: ["硬限位触发：位置可能已丢失", "请复位后重新回零"],
+  2: ["软限位：目标超出行程，位置仍可信", "解锁即可"],
+  3: ["运动中复位：位置可能已丢失", "请重新回零"],
   4: "探针失败：探针在开始前已触发",
   5: "探针失败：行程内未触碰到探针",
   6: "回零失败：回零中途被复位",
@@ -311,24 +312,52 @@ const ERRORS_ZH = {
   3: "无效的 $ 命令",
   4: "数值不能为负",
   5: "未启用回零（$22=0）",
+  6: "步进脉冲太短（至少 3 微秒）",
+  7: "读取 EEPROM 失败，设置已恢复为默认值",
   8: "机器不空闲，命令被拒绝",
   9: "报警或点动中，G 代码被锁定",
   10: "软限位需要先启用回零",
   11: "行过长",
+  12: "步进频率过高",
+  13: "安全门被打开",
+  14: "存储的行过长",
   15: "点动目标超出行程",
   16: "点动命令含不允许的 G/M 代码",
+  17: "激光模式需要 PWM 主轴输出",
+  18: "未分配的代码",
+  19: "未分配的代码",
   20: "不支持的命令或字母",
   21: "模态组冲突",
   22: "未指定进给速度",
+  23: "命令号不是整数",
   24: "一个程序段中有两个需要轴字的命令",
   25: "重复的字",
   26: "缺少轴字",
+  27: "行号无效",
+  28: "缺少数值字（P 或 L）",
+  29: "不支持的坐标系",
+  30: "G53 需要 G0 或 G1",
+  31: "G80 下不能给轴字",
+  32: "圆弧平面内没有轴字",
   33: "无效的目标",
+  34: "圆弧半径错误",
+  35: "圆弧平面内没有圆心偏移",
   36: "程序段中有多余的字",
+  37: "G43.1 轴错误",
+  38: "刀具号过大",
 };
+// A code Grbl 1.1h does not have (grblHAL and FluidNC add their own).
+const UNKNOWN_CODE_ZH = "不是 Grbl 1.1h 的代码（grblHAL 和 FluidNC 有各自的代码）";
+const CODE_LABEL_ZH = { ALARM: "报警", error: "错误" };
+// `ALARM:N (Name): meaning — hint.` (codes.describe_alarm and describe_error, {3} the hint), the
+// engine's `ALARM:N meaning` and `error:N meaning` (their hint comes apart), or a bare `error:N`.
+const CODE = /^(ALARM|error):(\d+)(?:$| (?:\([^)]*\): .* — (.+)\.$)?)/;
 
-// Server sentences in the Chinese page, tried in order; {1}... are the captured parts.
+// Server sentences in the Chinese page, tried in order; {1}... are the captured parts, each put
+// into Chinese in turn (by WHAT_ZH, a code or these patterns). tests/web/test_fault_strings.py
+// reads the lines of this list and fails on a sentence of the server that none translates.
 const SERVER_ZH = [
+  // Why jogging is off (the engine's can_jog, session_backend, control).
   [/^the controller is in Alarm: unlock with \$X or home with \$H first$/, "控制器处于报警状态：请用 $X 解锁或用 $H 回零"],
   [/^the controller is in feed hold: resume \(~\) or reset before jogging$/, "控制器处于进给保持：点动前请继续（~）或复位"],
   [/^the safety door is open: close it and resume \(~\) before jogging$/, "安全门已打开：关上并继续（~）后才能点动"],
@@ -341,28 +370,197 @@ const SERVER_ZH = [
   [/^soft limits are on but the machine looks unhomed .*home it with \$H first$/, "已开启软限位，但机器似乎未回零（机械坐标为 0,0,0，任何正向点动都会报 error:15）：请先用 $H 回零"],
   [/^the connection to the controller is lost$/, "与控制器的连接已断开"],
   [/^check the cable and restart$/, "请检查线缆后重启"],
-  [/^jogging waits: (homing|unlocking|resetting|setting work zero|a console line|selecting G5\d) is running$/, "点动需等待：{1} 正在执行"],
+  [/^jogging waits: (.+)$/, "点动需等待：{1}"],
+  [/^(.+) is running$/, "{1} 正在执行"],
+  [/^selecting (\S+)$/, "选择 {1}"],
   [/^wait: (.+) has not finished$/, "请等待：{1} 尚未完成"],
   [/^the machine is moving: press STOP and wait until it stands still$/, "机器正在移动：请按停止并等它停稳"],
+  // The engine's faults (jogger.py _fault_now) and their fix hints.
+  [/^the controller was reset \(its banner arrived mid-session\)$/, "控制器被复位了（会话中途收到了它的开机信息）"],
+  [/^the controller was reset \(its banner arrived mid-session\); (\d+) jog lines? had no reply yet: any that reach the restarted controller are cancelled as soon as it reports Jog$/, "控制器被复位了（会话中途收到了它的开机信息）；有 {1} 行点动指令尚未应答：其中到达重启后控制器的，一旦它报告 Jog 就会被取消"],
+  [/^check why it reset; smoothjog re-reads its settings before jogging again$/, "请查明复位原因；再次点动前 smoothjog 会重新读取它的设置"],
+  [/^the safety door opened$/, "安全门被打开"],
+  [/^close the door and resume \(~\)$/, "请关上安全门并继续（~）"],
+  [/^jog not sent: (.+)$/, "点动指令未发送：{1}"],
+  [/^check the intent that asked for it$/, "请检查发出这个点动请求的输入"],
+  [/^jog less far or elsewhere$/, "请缩短点动距离，或换个地方点动"],
+  [/^the target lies outside the soft limits$/, "目标超出软限位"],
+  [/^the path crosses the keep-out zone (.+)$/, "路径穿过禁入区 {1}"],
+  [/^step refused: no room to jog ([A-Z][+-]), (.+) is there \((.+)\)$/, "步进被拒绝：{1} 方向已到{2}（{3}）"],
+  [/^the soft limit$/, "软限位"],
+  [/^the keep-out zone (.+)$/, "禁入区 {1}"],
+  [/^at ([A-Z] -?\d+\.\d+(?:, [A-Z] -?\d+\.\d+)*)$/, "位置 {1}"],
+  [/^jog the other way$/, "请往反方向点动"],
+  [/^the controller did not answer (\d+) lines? within (\d+(?:\.\d+)?) s: the reply was lost on the link$/, "控制器在 {2} 秒内没有应答 {1} 行指令：应答在链路上丢失了"],
+  [/^smoothjog cancelled and re-synced; check the cable or connection if this repeats$/, "smoothjog 已取消运动并重新同步；若反复出现，请检查线缆或网络连接"],
+  [/^stop sync failed: (error:\d+)$/, "停止后的同步失败：{1}"],
+  [/^the machine stopped (\d+\.\d+) mm off the path smoothjog sent: something outside smoothjog stopped or moved it$/, "机器停在偏离 smoothjog 所发路径 {1} mm 处：smoothjog 以外的操作让它停下或移动了"],
+  [/^check for another program, a button or a pendant on the controller; smoothjog has re-read the position$/, "请检查是否有其他程序、按钮或控制器上接的手持器；smoothjog 已重新读取位置"],
+  [/^jog rejected: (error:\d+ .+)$/, "点动被控制器拒绝：{1}"],
+  [/^the controller ran a jog block in Run state \(a Grbl race\)$/, "控制器在 Run 状态下执行了点动程序段（Grbl 的竞态问题）"],
+  [/^smoothjog stopped streaming; the machine stops at the end of what was queued$/, "smoothjog 已停止发送；机器会在已排队的运动走完后停下"],
+  [/^the controller's (.+) input was pressed: the controller is stopping$/, "控制器的{1}输入被触发：控制器正在停止"],
+  [/^(feed-hold|door) and (feed-hold|door)$/, "{1}和{2}"],
+  [/^release it, resume with ~ if it holds, and jog again$/, "请松开它；若机器处于保持状态，用 ~ 继续，然后再点动"],
+  [/^jogging stopped: ([A-Z]\w*)$/, "点动已停止：控制器处于 {1} 状态"],
+  [/^jogging stopped: (.+)$/, "点动已停止：{1}"],
+  [/^the jog was stopped outside smoothjog: (.+); stopped by (.+)$/, "点动被 smoothjog 以外的操作停止：{1}；停止来源：{2}"],
+  [/^it stood still (\d+\.\d+) mm short of the path it was sent$/, "机器在距所发路径终点 {1} mm 处停住"],
+  [/^it fell (\d+\.\d+) mm behind the path it was sent$/, "机器落后所发路径 {1} mm"],
+  [/^it left the path smoothjog sent$/, "机器偏离了 smoothjog 所发的路径"],
+  [/^it came to rest short of the path's end$/, "机器未到路径终点就停下了"],
+  [/^the controller's (feed-hold|door) input$/, "控制器的{1}输入"],
+  [/^a feed hold or jog cancel from outside smoothjog \(a button, another program\)$/, "来自 smoothjog 以外的进给保持或点动取消（按钮或其他程序）"],
+  [/^release the stick \(or key\) and press it again to jog on$/, "请松开摇杆（或按键），再按下即可继续点动"],
+  // The fix hints of the alarm and error codes (codes.py), sent beside `ALARM:N` and `error:N`.
+  [/^reset \(Ctrl-X\), move off the switch after \$X, then home again with \$H$/, "请复位（Ctrl-X），用 $X 解锁后移离限位开关，再用 $H 重新回零"],
+  [/^reset \(Ctrl-X\) and unlock with \$X, then send a target inside the travel$/, "请复位（Ctrl-X）并用 $X 解锁，然后发送行程内的目标"],
+  [/^home again with \$H \(or unlock with \$X if the machine has no homing and you re-zero by hand\)$/, "请用 $H 重新回零（机器没有回零开关、要手动重新对零时，可用 $X 解锁）"],
+  [/^check the probe wiring and clear the probe before probing$/, "请检查探针接线，并在探测前让探针脱离接触"],
+  [/^move closer to the workpiece or probe further, then reset and unlock$/, "请靠近工件或加大探测距离，然后复位并解锁"],
+  [/^home again with \$H$/, "请用 $H 重新回零"],
+  [/^close the door and home again$/, "请关上安全门后重新回零"],
+  [/^raise the pull-off distance \(\$27\) or check the switch wiring$/, "请加大回退距离（$27）或检查限位开关接线"],
+  [/^check the switches and \$130-\$132 \(travel\), then home again$/, "请检查限位开关和 $130-$132（行程），然后重新回零"],
+  [/^check the second switch of that axis and its wiring$/, "请检查该轴的第二个限位开关及其接线"],
+  [/^look the code up in your controller firmware's documentation, then reset and unlock$/, "请在控制器固件的文档中查找此代码，然后复位并解锁"],
+  [/^look the code up in your controller firmware's documentation$/, "请在控制器固件的文档中查找此代码"],
+  [/^Grbl 1\.1h never sends this code; another firmware may use it$/, "Grbl 1.1h 从不发送此代码；可能来自其他固件"],
+  [/^check the line for characters that are not G-code words$/, "请检查该行中不属于 G 代码字的字符"],
+  [/^give every word a value such as X1\.5$/, "请给每个字一个数值，例如 X1.5"],
+  [/^write jogs as '\$J=' followed by the words; send '\$' to list the commands$/, "点动请写成 '$J=' 后接各个字；发送 '$' 可列出所有命令"],
+  [/^use a value of zero or more; a jog's direction goes in the axis word, not in F$/, "请使用零或正数；点动方向写在轴字里，不写在 F 里"],
+  [/^enable homing with \$22=1 if the machine has homing switches$/, "机器装有回零开关时，请用 $22=1 启用回零"],
+  [/^set \$0 to 3 or more$/, "请把 $0 设为 3 或更大"],
+  [/^check and re-enter the settings with \$\$$/, "请用 $$ 检查并重新输入设置"],
+  [/^wait for the move to finish, clear an alarm with \$H or \$X, or leave check mode with \$C, then jog again$/, "请等运动结束，用 $H 或 $X 解除报警，或用 $C 退出检查模式，然后再点动"],
+  [/^in Alarm home \(\$H\) or unlock \(\$X\) first; while jogging, wait for Idle or cancel the jog before sending G-code$/, "报警时请先回零（$H）或解锁（$X）；点动中请等到空闲或取消点动后再发 G 代码"],
+  [/^enable homing with \$22=1 first, then \$20=1$/, "请先用 $22=1 启用回零，再设 $20=1"],
+  [/^send shorter lines; a jog line needs only units, mode, the axes and F$/, "请发送更短的行；点动行只需单位、模式、轴和 F"],
+  [/^lower the maximum rate \(\$110-\$112\) or the steps per mm \(\$100-\$102\)$/, "请降低最大速度（$110-$112）或每毫米步数（$100-$102）"],
+  [/^close the door, then resume with '~'$/, "请关上安全门，然后用 '~' 继续"],
+  [/^store a shorter line$/, "请存储更短的行"],
+  [/^home the machine so positions are true, or jog less far$/, "请回零使位置准确，或缩短点动距离"],
+  [/^a jog may hold only G20\/G21, G90\/G91, G53, the axis words, F and N$/, "点动只能包含 G20/G21、G90/G91、G53、轴字、F 和 N"],
+  [/^use a firmware build with variable spindle support, or leave \$32=0$/, "请使用支持可变主轴输出的固件版本，或保持 $32=0"],
+  [/^remove the word; write numbers without exponents$/, "请删除该字；数字不要用指数形式"],
+  [/^keep one command per group in a line$/, "同一行中每个模态组只保留一个命令"],
+  [/^give F > 0; every jog needs its own F because a jog's F is never remembered$/, "请给出 F > 0；点动的 F 不会被记住，所以每条点动都要带 F"],
+  [/^use whole command numbers, or one of the few supported ones like G38\.2 or G43\.1$/, "请使用整数命令号，或少数支持的小数命令，如 G38.2 或 G43.1"],
+  [/^split them into separate lines$/, "请把它们分成多行"],
+  [/^give each letter once per line$/, "每行中每个字母只能出现一次"],
+  [/^add the axis words the command needs$/, "请补上命令需要的轴字"],
+  [/^use line numbers from 0 to 10,000,000, or none$/, "请使用 0 到 10,000,000 的行号，或不用行号"],
+  [/^add the missing P or L word$/, "请补上缺少的 P 或 L 字"],
+  [/^use P0 \(active\) or P1-P6 \(G54-G59\)$/, "请使用 P0（当前坐标系）或 P1-P6（G54-G59）"],
+  [/^put G0 or G1 in the line with G53$/, "请在含 G53 的行中加上 G0 或 G1"],
+  [/^select G0 or G1 before giving axis words$/, "给出轴字前请先选择 G0 或 G1"],
+  [/^give at least one axis of the arc's plane \(G17: X\/Y, G18: Z\/X, G19: Y\/Z\)$/, "请至少给出圆弧所在平面的一个轴（G17：X/Y，G18：Z/X，G19：Y/Z）"],
+  [/^check the arc's end point and centre, or the probe target$/, "请检查圆弧的终点和圆心，或探测目标"],
+  [/^use a radius of at least half the distance to the end point$/, "半径至少要是到终点距离的一半"],
+  [/^give the arc's centre with I\/J\/K or its radius with R$/, "请用 I/J/K 给出圆心，或用 R 给出半径"],
+  [/^remove the extra words; set S and T with plain G-code, not in a jog$/, "请删除多余的字；S 和 T 请用普通 G 代码设置，不要写在点动里"],
+  [/^write G43\.1 Z<offset> with no other axis word$/, "请写成 G43.1 Z<偏移>，不带其他轴字"],
+  [/^use a tool number from 0 to 255$/, "请使用 0 到 255 的刀具号"],
+  // A jog line or intent that cannot be built (JogBuildError: intents.py, jogline.py, jogger.py).
+  [/^speed ratio for unknown axis (.+)$/, "速度比指定了不存在的轴 {1}"],
+  [/^speed ratio (.+) for (\w+) must be in \(0, 1\]$/, "{2} 轴的速度比 {1} 必须在 (0, 1] 之内"],
+  [/^cannot step axis (.+): the machine has (\(.*\))$/, "无法步进 {1} 轴：机器的轴为 {2}"],
+  [/^step of (.+) mm is outside (.+) to (.+) mm$/, "步长 {1} mm 超出 {2} 到 {3} mm 的范围"],
+  [/^step speed (.+) must be in \(0, 1\]$/, "步进速度 {1} 必须在 (0, 1] 之内"],
+  [/^cannot go to (.+): the machine has (\(.*\))$/, "无法移动到 {1}：机器的轴为 {2}"],
+  [/^go-to target (\w+)=(.+) is not a number$/, "定位目标 {1}={2} 不是数字"],
+  [/^a go-to needs at least one axis target$/, "定位至少需要一个轴的目标"],
+  [/^go-to speed (.+) must be in \(0, 1\]$/, "定位速度 {1} 必须在 (0, 1] 之内"],
+  [/^cannot jog axis (.+): the machine has (\(.*\))$/, "无法点动 {1} 轴：机器的轴为 {2}"],
+  [/^deflection (\w+)=(.+) must be in \[-1, 1\]$/, "摇杆偏转 {1}={2} 必须在 [-1, 1] 之内"],
+  [/^speed (.+) must be in \(0, 1\]$/, "速度 {1} 必须在 (0, 1] 之内"],
+  [/^cannot turn the handwheel on axis (.+): the machine has (\(.*\))$/, "无法在 {1} 轴上使用手轮：机器的轴为 {2}"],
+  [/^handwheel step of (.+) mm per count is outside (.+) to (.+) mm$/, "手轮每格 {1} mm 超出 {2} 到 {3} mm 的范围"],
+  [/^handwheel counts (.+) must be a whole number$/, "手轮格数 {1} 必须是整数"],
+  [/^handwheel mode (.+) must be one of (.+)$/, "手轮模式 {1} 必须是 {2} 之一"],
+  [/^handwheel speed (.+) must be in \(0, 1\]$/, "手轮速度 {1} 必须在 (0, 1] 之内"],
+  [/^speed (.+) gives (.+) mm\/min, below Grbl's 1 mm\/min minimum$/, "速度 {1} 对应 {2} mm/min，低于 Grbl 的最低值 1 mm/min"],
+  [/^cannot write (.+) in a jog line: Grbl only reads finite numbers; check the input that produced it$/, "无法把 {1} 写进点动指令：Grbl 只读取有限的数值；请检查产生它的输入"],
+  [/^cannot write (.+) in a jog line: it needs (\d+) digits and Grbl keeps only (\d+); no machine travels that far, so check the units$/, "无法把 {1} 写进点动指令：它需要 {2} 位数字，而 Grbl 只保留 {3} 位；没有机器的行程这么远，请检查单位"],
+  [/^jog mode (.+) is not one of (.+)$/, "点动模式 {1} 不是 {2} 之一"],
+  [/^jog units (.+) is not one of (.+)$/, "点动单位 {1} 不是 {2} 之一"],
+  [/^machine axes (\[.*\]) are not axis letters; use letters from ([A-Z]+)$/, "机器的轴 {1} 不是轴字母；请使用 {2} 中的字母"],
+  [/^a jog needs at least one axis word: Grbl sends a jog with none to machine zero$/, "点动至少需要一个轴字：没有轴字的点动会被 Grbl 送到机械零点"],
+  [/^cannot jog axis (.+): this machine has only (.+); check the axis mapping of the input$/, "无法点动 {1} 轴：这台机器只有 {2}；请检查该输入的轴映射"],
+  [/^cannot jog (\w+) by (.+): the value must be a finite number of mm$/, "无法让 {1} 轴移动 {2}：数值必须是有限的毫米数"],
+  [/^jog feed (.+) mm\/min is not a positive number; Grbl needs F > 0 \(error:(\d+) for F0, error:(\d+) for a negative F\)$/, "点动进给 {1} mm/min 不是正数；Grbl 要求 F > 0（F0 会报 error:{2}，负的 F 会报 error:{3}）"],
+  [/^every jog distance rounds to 0 at the precision written, so there is nothing to send \(a jog with no axis word would go to machine zero\)$/, "按写入的精度，每个点动距离都舍入为 0，没有可发送的内容（没有轴字的点动会走到机械零点）"],
+  [/^jog feed (.+) mm\/min rounds to F0, which Grbl refuses \(error:(\d+)\)$/, "点动进给 {1} mm/min 舍入后为 F0，Grbl 会拒绝（error:{2}）"],
+  [/^the jog line (.+) has (\d+) characters but the controller stores at most (\d+) \(error:(\d+)\); jog fewer axes at once$/, "点动指令 {1} 有 {2} 个字符，但控制器最多存储 {3} 个（error:{4}）；请一次点动更少的轴"],
+  // Refusals and notices of the pendant's server and the arbiter (server.py, arbiter.py).
   [/^this pendant is watching only; press Take control to drive the machine$/, "本控制器仅观看；点“接管控制”才能操作机器"],
   [/^jog stopped: no heartbeat from this pendant for (\d+) ms \(weak Wi-Fi or a busy device\?\)$/, "点动已停止：本控制器 {1} 毫秒没有心跳（Wi-Fi 信号弱或设备太忙？）"],
+  [/^the dead-man stopped this jog; release the controls and press again$/, "心跳保护已停止这次点动；请松开所有控制后重新按下"],
+  [/^jog refused: (.+)$/, "点动被拒绝：{1}"],
+  [/^another (.+) is holding a jog; control can pass once it releases$/, "另一个{1}正在点动；它松开后才能接管控制"],
+  [/^this (.+) is watching only; take control to drive the machine$/, "本{1}仅观看；接管控制后才能操作机器"],
+  [/^(\S+) input (.+) is detached; attach it again to drive the machine$/, "{1}输入 {2} 已断开；重新接入后才能操作机器"],
+  [/^jogging is disabled: (.+)$/, "不能点动：{1}"],
+  [/^binary frames are not understood; send JSON text$/, "无法识别二进制帧；请发送 JSON 文本"],
+  [/^machine view unavailable: (.+)$/, "机器状态不可用：{1}"],
+  // Machine commands refused or failed (control.py, session_backend.py), and the link's words.
   [/^homing is not enabled on this controller .*$/, "此控制器未启用回零（$22=0）：没有可回零的开关；只有机器装了开关时才设 $22=1"],
   [/^the work offset is not known yet; wait for the next status report$/, "工件偏移尚未知道：请等下一份状态报告"],
-  [/^jogging stopped: (.+)$/, "点动已停止：{1}"],
-  [/^jog refused: (.+)$/, "点动被拒绝：{1}"],
-  [/^another (.+) is holding a jog; control can pass once it releases$/, "另一个输入正在点动；它松开后才能接管"],
-  [/^this (.+) is watching only; take control to drive the machine$/, "本控制器仅观看；接管控制后才能操作机器"],
-  [/^jogging is disabled: (.+)$/, "不能点动：{1}"],
   [/^type a line to send, for example \$G or G0 X10$/, "请输入要发送的行，例如 $G 或 G0 X10"],
   [/^the line is (\d+) characters; this controller reads at most (\d+)$/, "该行有 {1} 个字符；此控制器最多读取 {2} 个"],
+  [/^the controller did not restart within (\d+(?:\.\d+)?) s$/, "控制器在 {1} 秒内没有重启"],
+  [/^name at least one axis to zero$/, "请至少指定一个要置零的轴"],
+  [/^this machine has no (.+) axis \(it has (.+)\)$/, "这台机器没有 {1} 轴（只有 {2}）"],
+  [/^('.*'|".*") is not one of (G5\d(?:, G5\d)*)$/, "{1} 不是 {2} 之一"],
+  [/^no override ('.*'|".*"); the overrides are (.+)$/, "没有 {1} 这种倍率；可用的有 {2}"],
+  [/^(\w+) override has no step ('.*'|".*"); use (.+)$/, "{1}倍率没有 {2} 这一档；可用 {3}"],
+  [/^nothing to resume: the machine is in (.+), not in Hold$/, "没有可继续的运动：机器当前为{1}，不处于保持状态"],
+  [/^unknown command ('.*'|".*")$/, "未知命令 {1}"],
+  [/^line (.+) contains an end-of-line at position (\d+): send one line per call, the link adds the `\\n` itself$/, "行 {1} 在位置 {2} 含有换行符：每次只发送一行，链路会自己加上换行"],
+  [/^line (.+) contains (.+), which Grbl treats as a realtime command wherever it appears: send it with send_realtime\(\) instead$/, "行 {1} 含有 {2}，无论它出现在哪里，Grbl 都把它当作实时命令：请改用实时命令发送"],
+  [/^line (.+) contains the character (.+) at position (\d+): only printable ASCII can be sent to a Grbl controller$/, "行 {1} 在位置 {3} 含有字符 {2}：只有可打印的 ASCII 字符能发送给 Grbl 控制器"],
+  [/^the controller reset before it answered (.+)$/, "控制器在应答 {1} 之前复位了"],
+  [/^(.+) did not answer (.+) within (\d+(?:\.\d+)?) s$/, "{1} 在 {3} 秒内没有应答 {2}"],
+  [/^lost (.+?) \((.+)\): the controller was unplugged, reset or powered off; check the cable and connect again$/, "与 {1} 的连接断开（{2}）：控制器被拔下、复位或断电；请检查线缆后重新连接"],
+  [/^lost (.+?) \((.+)\): the controller restarted, dropped off the network or accepted another client; connect again$/, "与 {1} 的连接断开（{2}）：控制器重启、掉线或接受了另一个客户端；请重新连接"],
+  [/^(reading|writing|sending|receiving) failed: (.+)$/, "{1}失败：{2}"],
+  [/^the device reported end of file$/, "设备报告文件已结束"],
+  [/^the controller closed the connection$/, "控制器关闭了连接"],
+  [/^the link to (.+) was closed$/, "到 {1} 的连接已关闭"],
+  [/^the session stopped: (.+)$/, "会话已停止：{1}"],
+  [/^simulated (.+) at (\d+) baud$/, "模拟控制器 {1}，{2} 波特"],
+  [/^(\S+) at (\d+) baud$/, "{1}（{2} 波特）"],
+  [/^(.+) is closed$/, "{1} 已关闭"],
 ];
 
+// Words and parts the sentences above embed, by their whole text (and a machine state by its
+// name in STRINGS).
 const WHAT_ZH = {
   homing: "回零",
   unlocking: "解锁",
   resetting: "复位",
   "setting work zero": "置零",
   "a console line": "控制台命令",
+  "feed-hold": "进给保持",
+  door: "安全门",
+  reading: "读取",
+  writing: "写入",
+  sending: "发送",
+  receiving: "接收",
+  feed: "进给",
+  rapid: "快移",
+  "an unknown state": "未知状态",
+  "the machine gives no reason": "机器没有给出原因",
+  // Inputs by kind (Input.kind) and by noun (inputs.base.KIND_NOUNS).
+  web: "网页",
+  pendant: "控制器",
+  gamepad: "手柄",
+  keyboard: "键盘",
+  handwheel: "手轮",
+  spacemouse: "SpaceMouse",
+  script: "脚本",
+  input: "输入",
 };
 
 let lang = "en";
@@ -407,26 +605,27 @@ export function applyStrings(root = document) {
   document.title = t("title");
 }
 
-function fill(template, match) {
-  return template.replace(/\{(\d)\}/g, (_, i) => {
-    const part = match[Number(i)] ?? "";
-    return WHAT_ZH[part] ?? translateServer(part);
-  });
+function codeSentence(m) {
+  const entry = (m[1] === "ALARM" ? ALARMS_ZH : ERRORS_ZH)[Number(m[2])] ?? UNKNOWN_CODE_ZH;
+  const [what, todo] = Array.isArray(entry) ? entry : [entry];
+  const head = `${CODE_LABEL_ZH[m[1]]} ${Number(m[2])}：${what}`;
+  if (m[3] === undefined) return head;
+  const hint = translateServer(m[3]);
+  if (hint !== m[3]) return `${head}——${hint}`;
+  return todo ? `${head}，${todo}` : head;
 }
 
 /** A sentence from the server in the page's language (as sent when no pattern knows it). */
 export function translateServer(text) {
   const s = String(text ?? "");
   if (lang !== "zh" || s === "") return s;
-  const code = /^(ALARM|error):(\d+) \(/.exec(s);
-  if (code) {
-    const n = Number(code[2]);
-    const zh = code[1] === "ALARM" ? ALARMS_ZH[n] : ERRORS_ZH[n];
-    if (zh) return `${code[1] === "ALARM" ? "报警" : "错误"} ${n}：${zh}`;
-  }
+  if (Object.hasOwn(WHAT_ZH, s)) return WHAT_ZH[s];
+  if (Object.hasOwn(STRINGS.zh, `st.${s}`)) return STRINGS.zh[`st.${s}`];
+  const code = CODE.exec(s);
+  if (code) return codeSentence(code);
   for (const [pattern, template] of SERVER_ZH) {
     const m = pattern.exec(s);
-    if (m) return fill(template, m);
+    if (m) return template.replace(/\{(\d)\}/g, (_, i) => translateServer(m[Number(i)] ?? ""));
   }
   return s;
 }

@@ -1,0 +1,877 @@
+"""Every sentence the server sends the page (faults, hints, refusals, reasons) reads in Chinese.
+
+The sentences are not listed here: they are taken from the code that makes them with `ast` (every
+`_fault_now` of the engine, every JogBuildError, the arbiter's, the server's and the machine
+control's refusals, the link's losses, ...) and built the way that code builds them, each
+placeholder filled from SAMPLES or from the assignments, helpers and tables the code uses (the
+alarm and error tables, `_STATE_REASONS`, `_PIN_NAMES`). Each built sentence must match a pattern
+of SERVER_ZH in static/i18n.js (read from its lines) or be an alarm or error code, and its Chinese,
+put together by the same rules as translateServer(), must keep no English word but Grbl's words,
+units and the values passed through as sent. So a new fault without a translation fails here.
+Where node is installed, the real translateServer() gives the same Chinese as the rules here.
+"""
+
+from __future__ import annotations
+
+import ast
+import builtins
+import importlib
+import itertools
+import json
+import re
+import shutil
+import subprocess
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from smoothjog.core.codes import ALARM_CODES, ERROR_CODES
+from smoothjog.core.errors import InputRefused, JogBuildError
+from smoothjog.inputs.base import KIND_NOUNS
+from smoothjog.web.server import STATIC_DIR
+from tests.web.conftest import DESKTOP, OpenPage, StartPendant
+
+SRC = Path(__file__).parents[2] / "src" / "smoothjog"
+I18N = STATIC_DIR / "i18n.js"
+
+# ------------------------------------------------------------------------- i18n.js, read
+
+
+@dataclass(frozen=True)
+class Tables:
+    """What translateServer() uses, read from i18n.js."""
+
+    server: list[tuple[re.Pattern[str], str, str]]  # (pattern, template, the JS source)
+    what: dict[str, str]
+    states: dict[str, str]
+    alarms: dict[int, list[str]]
+    errors: dict[int, list[str]]
+    unknown: str
+    labels: dict[str, str]
+    code: re.Pattern[str]
+
+
+def _block(js: str, start: str, end: str) -> list[str]:
+    head = js.index(start)
+    return js[head + len(start) : js.index(end, head)].splitlines()
+
+
+def _compile(source: str) -> re.Pattern[str]:
+    # JS regexes without the u flag: \d and \w are ASCII; `\/` is a plain slash in both.
+    return re.compile(source, re.ASCII)
+
+
+@cache
+def tables() -> Tables:
+    js = I18N.read_text(encoding="utf-8")
+    server = []
+    entry = re.compile(r'^\s*\[/(?P<re>.+)/, (?P<tpl>"(?:[^"\\]|\\.)*")\],$')
+    for line in _block(js, "const SERVER_ZH = [", "\n];"):
+        if line.strip().startswith("//") or not line.strip():
+            continue
+        m = entry.match(line)
+        assert m, f"a SERVER_ZH line this test cannot read: {line!r}"
+        server.append((_compile(m["re"]), json.loads(m["tpl"]), m["re"]))
+    what = {}
+    for line in _block(js, "const WHAT_ZH = {", "\n};"):
+        if line.strip().startswith("//") or not line.strip():
+            continue
+        m = re.match(r'^\s*(?:"(?P<q>[^"]+)"|(?P<w>\w+)): (?P<v>".*"),$', line)
+        assert m, f"a WHAT_ZH line this test cannot read: {line!r}"
+        what[m["q"] or m["w"]] = json.loads(m["v"])
+    zh = js[js.index("\n  zh: {") :]
+    states = dict(re.findall(r'^\s*"st\.(\w+)": "(.*)",$', zh, re.M))
+    assert "Idle" in states
+    codes: dict[str, dict[int, list[str]]] = {}
+    for name in ("ALARMS_ZH", "ERRORS_ZH"):
+        rows = {}
+        for line in _block(js, f"const {name} = {{", "\n};"):
+            if not line.strip():
+                continue
+            m = re.match(r"^\s*(\d+): (.+),$", line)
+            assert m, f"a {name} line this test cannot read: {line!r}"
+            value = json.loads(m[2])
+            rows[int(m[1])] = value if isinstance(value, list) else [value]
+        codes[name] = rows
+    unknown = re.search(r"^const UNKNOWN_CODE_ZH = (\".*\");$", js, re.M)
+    labels = re.search(r'^const CODE_LABEL_ZH = \{ ALARM: (".*"), error: (".*") \};$', js, re.M)
+    code = re.search(r"^const CODE = /(.+)/;$", js, re.M)
+    assert unknown, "i18n.js has no UNKNOWN_CODE_ZH"
+    assert labels, "i18n.js has no CODE_LABEL_ZH"
+    assert code, "i18n.js has no CODE"
+    return Tables(
+        server=server,
+        what=what,
+        states=states,
+        alarms=codes["ALARMS_ZH"],
+        errors=codes["ERRORS_ZH"],
+        unknown=json.loads(unknown[1]),
+        labels={"ALARM": json.loads(labels[1]), "error": json.loads(labels[2])},
+        code=_compile(code[1]),
+    )
+
+
+def translate(s: str) -> str:
+    """translateServer() in Chinese, by the same rules (test_node_agrees checks they are)."""
+    t = tables()
+    if s == "":
+        return s
+    if s in t.what:
+        return t.what[s]
+    if s in t.states:
+        return t.states[s]
+    m = t.code.match(s)
+    if m:
+        rows = t.alarms if m[1] == "ALARM" else t.errors
+        what, *todo = rows.get(int(m[2]), [t.unknown])
+        head = f"{t.labels[m[1]]} {int(m[2])}：{what}"
+        if m[3] is None:
+            return head
+        hint = translate(m[3])
+        if hint != m[3]:
+            return f"{head}——{hint}"
+        return f"{head}，{todo[0]}" if todo else head
+    for pattern, template, _ in t.server:
+        found = pattern.search(s)
+        if found:
+
+            def part(g: re.Match[str], f: re.Match[str] = found) -> str:
+                return translate(_group(f, int(g[1])))
+
+            return re.sub(r"\{(\d)\}", part, template)
+    return s
+
+
+def _group(m: re.Match[str], i: int) -> str:
+    return (m[i] or "") if i <= m.re.groups else ""
+
+
+def first_pattern(s: str) -> str | None:
+    """The source of the pattern that translates s, "CODE" for a code, None for none."""
+    t = tables()
+    if s in t.what or s in t.states:
+        return "WHAT_ZH"
+    if t.code.match(s):
+        return "CODE"
+    return next((src for pattern, _, src in t.server if pattern.search(s)), None)
+
+
+# ------------------------------------------------------------------------- building the sentences
+
+
+class Skip(Exception):  # noqa: N818 -- a control-flow signal, not an error
+    """The text is someone else's (a str(exc) passed on), covered where it is made."""
+
+
+class Missing(Exception):  # noqa: N818
+    """A placeholder this test has no value for: add one to SAMPLES."""
+
+
+SKIP = object()
+
+
+@dataclass
+class Module:
+    """One source file: its tree, the functions enclosing each node, its real globals."""
+
+    rel: str
+    tree: ast.Module = field(init=False)
+    globals: dict[str, Any] = field(init=False)
+    enclosing: dict[int, ast.FunctionDef | ast.AsyncFunctionDef] = field(init=False)
+    functions: dict[str, list[ast.FunctionDef | ast.AsyncFunctionDef]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.tree = ast.parse((SRC / self.rel).read_text(encoding="utf-8"))
+        name = "smoothjog." + self.rel.removesuffix(".py").replace("/", ".")
+        self.globals = dict(vars(importlib.import_module(name)))
+        self.enclosing = {}
+        self.functions = {}
+
+        def visit(node: ast.AST, func: ast.FunctionDef | ast.AsyncFunctionDef | None) -> None:
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                self.functions.setdefault(node.name, []).append(node)
+                func = node
+            if func is not None:
+                self.enclosing[id(node)] = func
+            for child in ast.iter_child_nodes(node):
+                visit(child, func)
+
+        visit(self.tree, None)
+
+    @property
+    def stem(self) -> str:
+        return Path(self.rel).stem
+
+    def where(self, node: ast.AST) -> str:
+        return f"{self.rel}:{getattr(node, 'lineno', '?')}"
+
+
+@cache
+def module(rel: str) -> Module:
+    return Module(rel)
+
+
+def _locals(func: ast.FunctionDef | ast.AsyncFunctionDef) -> set[str]:
+    a = func.args
+    names = {x.arg for x in [*a.posonlyargs, *a.args, *a.kwonlyargs]}
+    names |= {x.arg for x in (a.vararg, a.kwarg) if x is not None}
+    for node in ast.walk(func):
+        if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            names.add(node.id)
+        elif isinstance(node, ast.ExceptHandler) and node.name:
+            names.add(node.name)
+    return names
+
+
+def _free_names(expr: ast.expr) -> list[str]:
+    bound = set()
+    for node in ast.walk(expr):
+        if isinstance(node, ast.comprehension):
+            bound |= {n.id for n in ast.walk(node.target) if isinstance(n, ast.Name)}
+        elif isinstance(node, ast.Lambda):
+            bound |= {x.arg for x in node.args.args}
+    loaded = {
+        n.id for n in ast.walk(expr) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)
+    }
+    return sorted(loaded - bound)
+
+
+def _self_method(mod: Module, expr: ast.expr) -> str | None:
+    """The name of a method of this module that expr calls on self, or None."""
+    if (
+        isinstance(expr, ast.Call)
+        and isinstance(expr.func, ast.Attribute)
+        and isinstance(expr.func.value, ast.Name)
+        and expr.func.value.id == "self"
+        and expr.func.attr in mod.functions
+    ):
+        return expr.func.attr
+    return None
+
+
+def _assignments(func: ast.AST, name: str) -> list[tuple[ast.expr, int | None]]:
+    """Each value assigned to name in func, with its index when unpacked from a tuple."""
+    out: list[tuple[ast.expr, int | None]] = []
+    for node in ast.walk(func):
+        if isinstance(node, ast.Assign):
+            for target in node.targets:
+                if isinstance(target, ast.Name) and target.id == name:
+                    out.append((node.value, None))
+                elif isinstance(target, ast.Tuple):
+                    for i, elt in enumerate(target.elts):
+                        if isinstance(elt, ast.Name) and elt.id == name:
+                            out.append((node.value, i))
+        elif (
+            isinstance(node, ast.AnnAssign)
+            and isinstance(node.target, ast.Name)
+            and node.target.id == name
+            and node.value is not None
+        ):
+            out.append((node.value, None))
+    return out
+
+
+def _samples(mod: Module, func: ast.AST, name: str) -> list[Any] | None:
+    fname = getattr(func, "name", "")
+    for key in (f"{mod.stem}.{fname}.{name}", f"{mod.stem}.{name}"):
+        if key in SAMPLES:
+            value = SAMPLES[key]
+            if value is SKIP:
+                raise Skip(key)
+            return list(value() if callable(value) else value)
+    return None
+
+
+Env = dict[str, Any]
+
+
+def _values(mod: Module, func: Any, name: str, env: Env, depth: int) -> Iterator[tuple[Any, Env]]:
+    sampled = _samples(mod, func, name)
+    if sampled is not None:
+        for value in sampled:
+            yield value, env
+        return
+    alternatives = _assignments(func, name)
+    if not alternatives or depth > 8:
+        raise Missing(f"{mod.stem}.{func.name}.{name} ({mod.where(func)})")
+    for value_expr, index in alternatives:
+        method = _self_method(mod, value_expr)
+        if method is not None:
+            for ret in returned(mod, method, index):
+                for v in build(mod, mod.functions[method][0], ret, {}, depth + 1):
+                    yield v, env
+        elif index is None:
+            for v, env2 in _build_envs(mod, func, value_expr, env, depth + 1):
+                yield v, env2
+        elif isinstance(value_expr, ast.Tuple):
+            for v, env2 in _build_envs(mod, func, value_expr.elts[index], env, depth + 1):
+                yield v, env2
+        else:
+            raise Missing(f"{mod.stem}.{func.name}.{name}: unpacked from {ast.unparse(value_expr)}")
+
+
+def _envs(mod: Module, func: Any, names: list[str], env: Env, depth: int) -> Iterator[Env]:
+    if not names:
+        yield env
+        return
+    name, rest = names[0], names[1:]
+    if name in env:
+        yield from _envs(mod, func, rest, env, depth)
+        return
+    for value, env2 in _values(mod, func, name, env, depth):
+        yield from _envs(mod, func, rest, {**env2, name: value}, depth)
+
+
+def _build_envs(
+    mod: Module, func: Any, expr: ast.expr, env: Env, depth: int = 0
+) -> Iterator[tuple[Any, Env]]:
+    method = _self_method(mod, expr)
+    if method is not None:
+        # What a helper of the module returns, its parameters from SAMPLES.
+        for ret in returned(mod, method):
+            for value in build(mod, mod.functions[method][0], ret, {}, depth + 1):
+                yield value, env
+        return
+    local = _locals(func) if func is not None else set()
+    names = []
+    for name in _free_names(expr):
+        if name in local:
+            names.append(name)
+        elif name not in mod.globals and not hasattr(builtins, name):
+            raise Missing(f"{mod.stem}.{name} ({mod.where(expr)})")
+    code = compile(ast.fix_missing_locations(ast.Expression(expr)), mod.rel, "eval")
+    for env2 in itertools.islice(_envs(mod, func, names, env, depth), 400):
+        # Globals and locals in one mapping: a comprehension inside sees the samples too.
+        yield eval(code, {**mod.globals, **env2}), env2
+
+
+def build(
+    mod: Module, func: Any, expr: ast.expr, env: Env | None = None, depth: int = 0
+) -> list[Any]:
+    """Every value expr takes in func with the samples (deduplicated, in order)."""
+    out = []
+    for value, _ in _build_envs(mod, func, expr, env or {}, depth):
+        if value not in out:
+            out.append(value)
+    return out
+
+
+def returned(mod: Module, method: str, index: int | None = None) -> list[ast.expr]:
+    """The expressions method returns (the index-th of a returned tuple), None left out."""
+    out = []
+    for func in mod.functions[method]:
+        for node in ast.walk(func):
+            if isinstance(node, ast.Return) and node.value is not None:
+                value = node.value
+                if index is not None:
+                    if not isinstance(value, ast.Tuple):
+                        continue
+                    value = value.elts[index]
+                if not (isinstance(value, ast.Constant) and value.value is None):
+                    out.append(value)
+    return out
+
+
+def method_returns(rel: str, method: str, index: int | None = None) -> list[str]:
+    mod = module(rel)
+    func = mod.functions[method][0]
+    return [v for e in returned(mod, method, index) for v in build(mod, func, e) if v]
+
+
+def call_args(rel: str, callee: str, position: int) -> list[str]:
+    """What the module passes as the position-th argument of its calls to callee."""
+    mod = module(rel)
+    out = []
+    for node in ast.walk(mod.tree):
+        if (
+            isinstance(node, ast.Call)
+            and _callee(node) == callee
+            and len(node.args) > position
+            and id(node) in mod.enclosing
+        ):
+            out += build(mod, mod.enclosing[id(node)], node.args[position])
+    return [v for v in out if isinstance(v, str)]
+
+
+def _callee(call: ast.Call) -> str | None:
+    f = call.func
+    return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None
+
+
+# ------------------------------------------------------------------------- samples
+
+
+def _jog_build_texts() -> list[str]:
+    return [text for site in jog_build_sites() for text in site.texts]
+
+
+def _refusal(text: str, cause: BaseException | None) -> InputRefused:
+    exc = InputRefused(text)
+    exc.__cause__ = cause
+    return exc
+
+
+_FAKE_LIMITS = SimpleNamespace(limits=SimpleNamespace(axes=("X", "Y", "Z")))
+_CODES = [SimpleNamespace(code=c) for c in (*range(1, 39), 40)]
+_SERIAL = SimpleNamespace(path="/dev/ttyUSB0", baud=115200)
+_TCP = SimpleNamespace(host="192.168.1.20", port=23)
+_SIM = SimpleNamespace(
+    firmware=SimpleNamespace(
+        profile=SimpleNamespace(name="grbl-1.1h"), machine=SimpleNamespace(name="hobby-router")
+    ),
+    rig=SimpleNamespace(link=SimpleNamespace(baud=115200)),
+)
+_RUNNING = ["homing", "unlocking", "resetting", "setting work zero", "a console line"]
+_RUNNING += ["selecting G54", "selecting G59"]
+
+
+def _describes() -> list[str]:
+    from smoothjog.links.serial import SerialLink
+    from smoothjog.links.sim import SimLink
+    from smoothjog.links.tcp import TcpLink
+
+    return [SerialLink.describe(_SERIAL), TcpLink.describe(_TCP), SimLink.describe(_SIM)]  # type: ignore[arg-type]
+
+
+def _pin_names() -> list[str]:
+    from smoothjog.core.jogger import _PIN_NAMES
+
+    pins = [_PIN_NAMES[p] for p in "HD"]
+    return [*pins, " and ".join(pins)]
+
+
+def _outside_hows() -> list[str]:
+    """How the stop showed: the words the callers pass, or what _lags_outside found."""
+    said = [
+        str(node.args[2].value)
+        for node in ast.walk(module("core/jogger.py").tree)
+        if isinstance(node, ast.Call)
+        and _callee(node) == "_outside_stop"
+        and isinstance(node.args[2], ast.Constant)
+    ]
+    return [*said, *method_returns("core/jogger.py", "_lags_outside")]
+
+
+def _room_stoppers() -> list[str]:
+    mod = module("core/jogger.py")
+    func = mod.functions["_room_along"][0]
+    return [v for e, i in _assignments(func, "by") for v in build(mod, func, e.elts[i]) if v]  # type: ignore[attr-defined]
+
+
+def _where_blocked(start: tuple[float, ...]) -> str:
+    from smoothjog.core.jogger import Jogger
+
+    return Jogger._where_blocked(_FAKE_LIMITS, start)  # type: ignore[arg-type]
+
+
+def _handles() -> list[SimpleNamespace]:
+    kinds = [*KIND_NOUNS, "other"]
+    return [SimpleNamespace(input=SimpleNamespace(kind=k, name="#2 10.0.0.5")) for k in kinds]
+
+
+#: Values for the placeholders, by "module.function.name" or "module.name": lists, or callables
+#: that make them; SKIP for a text that is another's (covered where it is made).
+SAMPLES: dict[str, Any] = {
+    # The engine.
+    "jogger.self": [SimpleNamespace(_where_blocked=_where_blocked)],
+    "jogger.resp": _CODES,
+    "jogger.jogs": [0, 1, 3],
+    "jogger.exc": lambda: [JogBuildError(t) for t in _jog_build_texts()],
+    "jogger.start": [(1.25, -3.0, 0.0)],
+    "jogger._step_room_mm.name": ["X+", "Z-"],
+    "jogger._step_room_mm.by": _room_stoppers,
+    "jogger._room_along.zone": [SimpleNamespace(name="clamp")],
+    "jogger._path_problem.zone": [SimpleNamespace(name="clamp")],
+    "jogger._presume_lost.lost": [[object()], [object()] * 3],
+    "jogger.waited_s": [0.55, 12.0],
+    "jogger.err_mm": [0.4, 12.25],
+    "jogger.rest_ahead_mm": [0.42],
+    "jogger.lag_mm": [1.5],
+    "jogger.pressed": _pin_names,
+    "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool"],
+    "jogger._outside_stop.how": _outside_hows,
+    # JogBuildError's texts.
+    "jogger.axis": ["A"],
+    "jogger.r": [1.5],
+    "intents.intent": [
+        SimpleNamespace(axis="A", dist_mm=250.0, speed=0.0, step_mm=0.0005, counts=1.5, mode="jump")
+    ],
+    "intents.axes": [("X", "Y", "Z")],
+    "intents.axis": ["A"],
+    "intents.value": [float("nan")],
+    "intents.speed": [0.0001],
+    "intents.feed_mm_min": [0.06],
+    "jogline.value": [float("nan"), 1.25e9],
+    "jogline.digits": [10],
+    "jogline.mode": ["G92"],
+    "jogline.units": ["G19"],
+    "jogline.unknown_axes": [["Q"]],
+    "jogline.axes": [("X", "Y", "Z")],
+    "jogline.axis": ["A"],
+    "jogline.feed_mm_min": [0.0, -5.0, 0.0004],
+    "jogline.line": ["$J=G21G91X1.5Y2.5Z0.5F1000"],
+    "jogline.max_line_chars": [24],
+    # The machine commands.
+    "control.self": [
+        SimpleNamespace(running=r, host=SimpleNamespace(link_error=None)) for r in _RUNNING
+    ],
+    "control.what": _RUNNING,
+    "control.word": ["G54", "G60"],
+    "control.axis": ["A"],
+    "control.known": [("X", "Y", "Z")],
+    "control.kind": ["feed", "rapid"],
+    "control.step": ["+5"],
+    "control.steps": [("reset", "+10", "-10")],
+    "control.resume.state": ["Idle", "an unknown state"],
+    "control.text": ["G0 X100 Y100 Z-5 F1500 (a very long comment for this controller)"],
+    "control.console.limit": [79],
+    "control.reply": _CODES,
+    "control.exc": SKIP,  # str(exc), str(host.error): another's words
+    "control.host": SKIP,
+    "control.reason": SKIP,  # what refusal() returns, built from refusal itself
+    # The arbiter and the server.
+    "arbiter.handle": _handles,
+    "arbiter._detached_text.handle": lambda: _handles()[:-1],
+    "arbiter.current": _handles,
+    "arbiter.reason": [
+        None,
+        "waiting for the controller's first status report",
+        "jogging waits: homing is running",
+    ],
+    "arbiter.exc": SKIP,
+    "arbiter.attach.input_": SKIP,  # attaching is refused before any page exists
+    "arbiter.check_lease_s.input_": SKIP,
+    "server.notice": [SimpleNamespace(silent_s=0.21)],
+    "server.on_text.exc": lambda: [_refusal(t, JogBuildError(t)) for t in _jog_build_texts()[:6]],
+    "server._goto_zero.exc": lambda: [_refusal(_jog_build_texts()[0], JogBuildError())],
+    "server._set_ratios.exc": lambda: [JogBuildError(t) for t in _jog_build_texts()],
+    "server.poll_view.exc": [KeyError("mpos")],
+    "server._announce.text": SKIP,  # a device's sentence (devices.py): not the server's
+    "server.refuse.text": SKIP,  # refuse()'s own parameter: its callers are the sites
+    "session_backend.self": SKIP,  # the engine's and the control's words, covered there
+    "session_backend.v": SKIP,
+    "session_backend.session": SKIP,
+    "session_backend.model": [SimpleNamespace(last_alarm=c) for c in (1, 2, 9, 12)],
+    "session_backend.can_jog.busy": lambda: [f"{r} is running" for r in _RUNNING],
+    "session_backend.name": ["jump"],
+    # The link and the host.
+    "base.text": ["G0 X1~"],
+    "base.char": ["~", "\t"],
+    "base.index": [5],
+    "serial.self": [SimpleNamespace(describe=lambda: _describes()[0])],
+    "serial.exc": [SimpleNamespace(strerror="Input/output error")],
+    "serial._lost.reason": lambda: call_args("links/serial.py", "_lost", 0),
+    "tcp.self": [SimpleNamespace(describe=lambda: _describes()[1])],
+    "tcp.exc": [SimpleNamespace(strerror="Connection reset by peer")],
+    "tcp._lost.reason": lambda: call_args("links/tcp.py", "_lost", 0),
+    "host.self": lambda: [
+        SimpleNamespace(describe=lambda d=d: d, link=SimpleNamespace(describe=lambda d=d: d))
+        for d in _describes()
+    ],
+    "host.text": ["$H"],
+    "host.timeout_s": [5.0],
+    "host.entry": [SimpleNamespace(text="G10L20P0X0")],
+    "host.exc": [KeyError("mpos")],
+}
+
+#: Texts sent as they are, however English (an OS's error, a name the user gave, ...).
+PASSTHROUGH = [
+    "Input/output error",
+    "Connection reset by peer",
+    "/dev/ttyUSB0",
+    "tcp://192.168.1.20:23",
+    "grbl-1.1h",
+    "hobby-router",
+    "Tool",  # a state Grbl 1.1h does not have, named as the controller names it
+    "nan",
+    "position, velocity",  # the handwheel modes and overrides, by their protocol names
+    "feed, rapid",
+    "reset, +10, -10",
+]
+#: Words the Chinese keeps: names, units, Grbl's states in its own spelling, acronyms.
+LATIN_OK = {
+    "smoothjog", "Grbl", "grblHAL", "FluidNC", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
+    "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi",
+}  # fmt: skip
+#: Grbl's own words: `error:15`, `$J=`, `$X`, G- and axis words, quoted values as sent.
+GRBL_WORDS = re.compile(
+    r"error:\d+|ALARM:\d+|\$[A-Za-z]+=?|\b[A-Z]\d[\d.]*\b|\b[XYZABCUVW]+\b|'[^']*'|\"[^\"]*\""
+)
+
+
+# ------------------------------------------------------------------------- the sites
+
+
+@dataclass
+class Site:
+    """One place that makes a sentence the page shows, and the sentences it makes."""
+
+    where: str
+    source: str
+    texts: list[str]
+
+
+#: Which expressions of a node make a sentence (the arguments of a call, say).
+Pick = Callable[[Module, ast.AST], list[ast.expr]]
+
+
+def _sites(rel: str, pick: Pick, only: tuple[str, ...] = ()) -> list[Site]:
+    """The sites pick finds in rel (only in the functions named, if any)."""
+    mod = module(rel)
+    out = []
+    for node in ast.walk(mod.tree):
+        func = mod.enclosing.get(id(node))
+        if only and getattr(func, "name", None) not in only:
+            continue
+        for expr in pick(mod, node):
+            if isinstance(expr, ast.Call) and _callee(expr) == "str":
+                continue  # another's text, passed on
+            try:
+                texts = [t for t in build(mod, func, expr) if isinstance(t, str) and t]
+            except Skip:
+                continue
+            out.append(Site(mod.where(expr), ast.unparse(expr), texts))
+    return out
+
+
+def _calls(name: str, *positions: int, keyword: str | None = None) -> Pick:
+    def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
+        if not (isinstance(node, ast.Call) and _callee(node) == name):
+            return []
+        picked = [node.args[p] for p in positions if p < len(node.args)]
+        return picked + [k.value for k in node.keywords if k.arg == keyword]
+
+    return pick
+
+
+def _returns(function: str, index: int | None = None) -> Pick:
+    def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
+        if not (isinstance(node, ast.FunctionDef) and node.name == function):
+            return []
+        return returned(mod, function, index)
+
+    return pick
+
+
+def _dict_values(*keys: str) -> Pick:
+    def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
+        if not isinstance(node, ast.Dict):
+            return []
+        return [
+            v
+            for k, v in zip(node.keys, node.values, strict=True)
+            if isinstance(k, ast.Constant) and k.value in keys
+        ]
+
+    return pick
+
+
+@cache
+def fault_sites() -> list[Site]:
+    """Every `self._fault_now(now_s, text, hint)` of the engine: its texts and its hints."""
+    return _sites("core/jogger.py", _calls("_fault_now", 1, 2))
+
+
+@cache
+def jog_build_sites() -> list[Site]:
+    return [
+        site
+        for rel in ("core/intents.py", "core/jogline.py", "core/jogger.py")
+        for site in _sites(rel, _calls("JogBuildError", 0))
+    ]
+
+
+#: Where a link says it was lost or closed, and where a console line fails, mid-session.
+LINK_LOST = ("_lost", "close")
+CONSOLE_FAILED = ("query", "_fail_console_entries")
+
+
+@cache
+def other_sites() -> list[Site]:
+    """Why jogging is off, and what the server, arbiter, control and link tell the page."""
+    return [
+        *_sites("core/jogger.py", _returns("can_jog", 1)),
+        *_sites("web/session_backend.py", _returns("can_jog", 1)),
+        *_sites("web/session_backend.py", _dict_values("text", "hint")),
+        *_sites("web/session_backend.py", _calls("ControlRefused", 0)),
+        *_sites("control.py", _returns("refusal")),
+        *_sites("control.py", _returns("busy_reason")),
+        *_sites("control.py", _calls("ControlRefused", 0)),
+        *_sites("control.py", _calls("CommandResult", 3, keyword="error")),
+        *_sites("control.py", _calls("_line", 1)),  # control.running, shown while it runs
+        *_sites("control.py", _calls("_running", 0)),
+        *_sites("arbiter.py", _calls("InputRefused", 0)),
+        *_sites("arbiter.py", _returns("_detached_text")),
+        *_sites("web/server.py", _calls("refuse", 1)),
+        *_sites("web/server.py", _calls("error_message", 0)),
+        *_sites("links/base.py", _calls("RefusedError", 0), only=("encode_line",)),
+        # A link lost mid-session (opening one fails before the pendant starts).
+        *_sites("links/serial.py", _calls("LinkError", 0), only=LINK_LOST),
+        *_sites("links/tcp.py", _calls("LinkError", 0), only=LINK_LOST),
+        *_sites("host.py", _calls("LinkError", 0)),
+        *_sites("host.py", _calls("ConnectError", 0), only=CONSOLE_FAILED),
+    ]
+
+
+def all_texts() -> list[tuple[str, str]]:
+    """(where, text) for every sentence the page can show."""
+    out = []
+    for site in [*fault_sites(), *jog_build_sites(), *other_sites()]:
+        out += [(site.where, text) for text in site.texts]
+    return out
+
+
+# ------------------------------------------------------------------------- the tests
+
+
+def test_the_patterns_are_read_and_python_reads_them_as_js_does() -> None:
+    t = tables()
+    assert len(t.server) > 150
+    js = I18N.read_text(encoding="utf-8")
+    block = _block(js, "const SERVER_ZH = [", "\n];")
+    assert len(t.server) == sum(1 for line in block if line.lstrip().startswith("[/"))
+    for pattern, template, source in t.server:
+        # Anchored, and only syntax both engines read alike (no lookbehind, named groups, flags).
+        assert source.startswith("^"), source
+        assert source.endswith("$"), source
+        assert not re.search(r"\(\?<|\(\?P|\\[pPkuxc]", source), source
+        used = {int(i) for i in re.findall(r"\{(\d)\}", template)}
+        assert used <= set(range(1, pattern.groups + 1)), (source, template)
+    assert set(ERROR_CODES) <= set(t.errors), "an error code without Chinese"
+    assert set(ALARM_CODES) <= set(t.alarms), "an alarm code without Chinese"
+
+
+def test_every_fault_of_the_engine_is_found_and_built() -> None:
+    source = (SRC / "core/jogger.py").read_text(encoding="utf-8")
+    calls = source.count("self._fault_now(")
+    assert calls >= 14
+    # A text and a hint per call (none skipped), each built from SAMPLES; "" is no hint.
+    assert len(fault_sites()) == 2 * calls
+    assert len(jog_build_sites()) >= 25
+    for site in [*fault_sites(), *jog_build_sites(), *other_sites()]:
+        assert site.texts or site.source == "''", f"{site.where}: nothing built: {site.source}"
+
+
+def test_every_sentence_the_page_shows_has_a_pattern() -> None:
+    missing = sorted({(w, s) for w, s in all_texts() if first_pattern(s) is None})
+    assert missing == [], "no SERVER_ZH pattern for:\n" + "\n".join(f"{w}: {s}" for w, s in missing)
+
+
+def _english_left(zh: str) -> list[str]:
+    rest = zh
+    for text in PASSTHROUGH:
+        rest = rest.replace(text, " ")
+    rest = GRBL_WORDS.sub(" ", rest)
+    return [w for w in re.findall(r"[A-Za-z]{3,}", rest) if w not in LATIN_OK]
+
+
+def test_every_sentence_reads_in_chinese() -> None:
+    left = {}
+    for where, text in all_texts():
+        zh = translate(text)
+        words = _english_left(zh)
+        if words or not re.search(r"[\u4e00-\u9fff]", zh):
+            left[text] = (where, zh, words)
+    assert left == {}, "English left in the Chinese page:\n" + "\n".join(
+        f"{w}: {t!r}\n    -> {zh!r} {words}" for t, (w, zh, words) in left.items()
+    )
+
+
+def test_the_alarm_and_error_sentences_read_in_chinese() -> None:
+    from smoothjog.core.codes import describe_alarm, describe_error
+
+    for code in [*ALARM_CODES, 11]:
+        text = describe_alarm(code)
+        zh = translate(text)
+        assert zh.startswith(f"报警 {code}："), (text, zh)
+        assert _english_left(zh) == [], (text, zh)
+    for code in [*ERROR_CODES, 40]:
+        text = describe_error(code)
+        zh = translate(text)
+        assert zh.startswith(f"错误 {code}："), (text, zh)
+        assert "——" in zh, f"the hint of {text!r} is not translated: {zh!r}"
+        assert _english_left(zh) == [], (text, zh)
+
+
+def test_every_pattern_is_used() -> None:
+    used = {first_pattern(s) for _, s in all_texts()}
+    # Inner parts are reached through the sentence around them.
+    inner: set[str] = set()
+    for _, s in all_texts():
+        _collect_inner(s, inner)
+    unused = [src for _, _, src in tables().server if src not in used | inner]
+    assert unused == [], "SERVER_ZH patterns no sentence of the server uses:\n" + "\n".join(unused)
+
+
+def _collect_inner(s: str, seen: set[str]) -> None:
+    t = tables()
+    m = t.code.match(s)
+    if m:
+        if m[3]:
+            seen.add(first_pattern(m[3]) or "")
+            _collect_inner(m[3], seen)
+        return
+    for pattern, _, src in t.server:
+        found = pattern.search(s)
+        if found:
+            seen.add(src)
+            for part in found.groups():
+                if part:
+                    _collect_inner(part, seen)
+            return
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="node is not installed")
+def test_node_agrees(tmp_path: Path) -> None:
+    """The real translateServer() in node gives the Chinese the rules here give."""
+    texts = sorted({s for _, s in all_texts()})
+    script = tmp_path / "translate.mjs"
+    script.write_text(
+        "globalThis.document = { documentElement: {} };\n"
+        f"const m = await import({json.dumps(I18N.as_uri())});\n"
+        'm.setLanguage("zh");\n'
+        'let input = "";\n'
+        "for await (const chunk of process.stdin) input += chunk;\n"
+        "console.log(JSON.stringify(JSON.parse(input).map((s) => m.translateServer(s))));\n",
+        encoding="utf-8",
+    )
+    node = shutil.which("node")
+    assert node is not None
+    done = subprocess.run(
+        [node, str(script)],
+        input=json.dumps(texts),
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=True,
+    )
+    by_node = dict(zip(texts, json.loads(done.stdout), strict=True))
+    differ = {s: (zh, translate(s)) for s, zh in by_node.items() if zh != translate(s)}
+    assert differ == {}
+
+
+async def test_the_chinese_page_shows_a_fault_and_its_hint_in_chinese(
+    pendant: StartPendant, open_page: OpenPage
+) -> None:
+    """In Chromium: the status line puts the text and the hint through translateServer()."""
+    p = await pendant()
+    page = await open_page(p.url, viewport=DESKTOP, touch=False, locale="zh-CN")
+    await page.wait_for_selector("#role:has-text('控制中')")
+    site = next(s for s in fault_sites() if any(t.startswith("step refused") for t in s.texts))
+    text = site.texts[0]
+    hint = next(h for s in fault_sites() for h in s.texts if h == "jog the other way")
+    p.backend.set_view(fault={"text": text, "hint": hint})
+    shown = f"{translate(text)} {translate(hint)}"
+    await page.wait_for_function(
+        "(want) => document.querySelector('#status-text').textContent === want", arg=shown
+    )
+    control = {**p.backend.view_state["control"], "running": "homing"}
+    p.backend.set_view(control=control)
+    await page.wait_for_function(
+        "() => document.querySelector('#m-running').textContent === '正在执行：回零'"
+    )
