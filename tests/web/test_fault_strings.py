@@ -474,6 +474,69 @@ def _handles() -> list[SimpleNamespace]:
     return [SimpleNamespace(input=SimpleNamespace(kind=k, name="#2 10.0.0.5")) for k in kinds]
 
 
+# The physical input devices (devices.py, inputs/*.py).
+_DEVICE_NAMES = [
+    "whb04b KTURT.LTD WHB04B",
+    "gamepad Xbox Wireless Controller",
+    "keyboard AT Translated Set 2 keyboard",
+    "knob Griffin PowerMate",
+    "shuttle Contour Design ShuttleXpress",
+    "spacemouse-evdev 3Dconnexion SpaceMouse Compact",
+]
+_DEVICE_LOSSES = [
+    "the device's stream ended",
+    "read error: Input/output error",
+    "unplugged or asleep (No such device)",
+    "unplugged or switched off (No such device)",
+    "the device was closed",
+    "the device closed (end of file)",
+]
+_DECODERS = ("gamepad", "keyboard", "knob", "shuttle", "spacemouse", "whb04b")
+
+
+class _OSError:
+    """An OSError as the device code reads it: its strerror, and str() the same words."""
+
+    strerror = "Input/output error"
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
+def _notice_texts() -> list[str]:
+    return [t for site in decoder_sites() if "describe" not in site.source for t in site.texts]
+
+
+def _describes_of_decoders() -> list[SimpleNamespace]:
+    out = []
+    for rel in _DECODERS:
+        for text in method_returns(f"inputs/{rel}.py", "describe"):
+            out.append(SimpleNamespace(name=rel, describe=lambda t=text: t))
+    return out
+
+
+def _command_outcomes() -> list[str]:
+    return [t for site in _sites("devices.py", _returns("__call__")) for t in site.texts]
+
+
+def _device_commands() -> list[SimpleNamespace]:
+    from smoothjog.inputs.device import DEVICE_COMMANDS
+
+    return [SimpleNamespace(name=n) for n in DEVICE_COMMANDS]
+
+
+def _whb04b_selves() -> list[SimpleNamespace]:
+    from smoothjog.inputs.whb04b import FEED_CODES
+
+    feeds = list(dict.fromkeys(FEED_CODES.values()))
+    return [
+        SimpleNamespace(watchdog_s=0.5, _axis=a, _feed=f, _mode=m)
+        for a in ("X", "A", None)
+        for f in feeds
+        for m in ("step", "continuous")
+    ]
+
+
 #: Values for the placeholders, by "module.function.name" or "module.name": lists, or callables
 #: that make them; SKIP for a text that is another's (covered where it is made).
 SAMPLES: dict[str, Any] = {
@@ -577,6 +640,104 @@ SAMPLES: dict[str, Any] = {
     "host.timeout_s": [5.0],
     "host.entry": [SimpleNamespace(text="G10L20P0X0")],
     "host.exc": [KeyError("mpos")],
+    # The physical input devices.
+    "devices.self": SKIP,  # only through its attributes below
+    "devices._tell_once.text": SKIP,  # _tell_once's own parameter: its callers are the sites
+    "devices.wish": ["whb04b", "gamepad"],
+    "devices.device": lambda: [
+        SimpleNamespace(path="/dev/hidraw3", problem=p)
+        for p in method_returns("inputs/discovery.py", "_problem")
+    ],
+    "devices.exc": [_OSError()],
+    "devices.decoder": _describes_of_decoders,
+    "devices.source": [SimpleNamespace(info=SimpleNamespace(name="KTURT.LTD WHB04B"))],
+    "devices.command": _device_commands,
+    "devices.__call__.exc": [
+        "homing is not enabled on this controller ($22=0): there are no switches to home to",
+        "the work offset is not known yet; wait for the next status report",
+    ],
+    "devices.result": [
+        SimpleNamespace(ok=False, error=None),
+        SimpleNamespace(ok=False, error="the controller did not restart within 5 s"),
+    ],
+    "hidraw_source.exc": [SimpleNamespace(strerror="Input/output error", errno=19)],
+    "evdev_source.exc": [SimpleNamespace(strerror="Input/output error", errno=19)],
+    "discovery.dev_path": ["/dev/hidraw3"],
+    "devinput.self": [
+        SimpleNamespace(name=n, ended=e)
+        for n, e in zip(_DEVICE_NAMES, [None, *_DEVICE_LOSSES[:5]], strict=True)
+    ],
+    "devinput._pump.self": SKIP,
+    "devinput.run.self": lambda: [
+        SimpleNamespace(name=_DEVICE_NAMES[0], ended=e) for e in [None, *_DEVICE_LOSSES]
+    ],
+    "devinput._apply.self": [SimpleNamespace(name=n) for n in _DEVICE_NAMES[:2]],
+    "devinput._apply.action": lambda: [SimpleNamespace(text=t) for t in _notice_texts()],
+    "devinput.notice.notice": SKIP,  # the arbiter's notice, covered there
+    "devinput._submit.exc": [
+        InputRefused("this pendant is watching only; press Take control to drive the machine"),
+        InputRefused("jogging is disabled: the controller is asleep: reset it to wake it"),
+    ],
+    "devinput.command": _device_commands,
+    "devinput._run_command.outcome": _command_outcomes,
+    "devinput.exc": [_OSError()],
+    "gamepad.self": [
+        SimpleNamespace(speed=sp, deadman=d, info=SimpleNamespace(name="Xbox Wireless Controller"))
+        for sp, d in ((0.5, 0x136), (0.125, 0x2C0), (1.0, None))
+    ],
+    "gamepad._command.self": [SimpleNamespace(deadman=d) for d in (0x136, 0x2C0)],
+    "gamepad._command.action": ["home", "goto_zero", "resume"],
+    "keyboard.self": [
+        SimpleNamespace(speed=0.25, _step_mode=m, _step_mm=0.1, _tap_step_mm=t)
+        for m in (False, True)
+        for t in (None, 0.01)
+    ],
+    "knob.self": [
+        SimpleNamespace(_axis="X", _step_mm=0.1, _mode=m) for m in ("position", "velocity")
+    ],
+    "knob.stopped": ["jog stopped; ", ""],
+    "shuttle.self": [
+        SimpleNamespace(
+            model=SimpleNamespace(name="ShuttleXpress"),
+            transport="hidraw",
+            enable=e,
+            buttons={
+                1: SimpleNamespace(kind="axis", axis="X"),
+                5: SimpleNamespace(kind="command", command=SimpleNamespace(name="zero")),
+            },
+            wheel=w,
+            wheel_mode="position",
+            step_mm=0.1,
+            active_axis=a,
+        )
+        for e, w, a in (("hold", "handwheel", "X"), ("toggle", "steps", None))
+    ],
+    "spacemouse.self": [
+        SimpleNamespace(
+            model="SpaceMouse Compact",
+            transport=t,
+            mapping=m,
+            buttons=b,
+            deadzone=0.1,
+            expo=2.0,
+            speed=0.5,
+            dominant=d,
+            watchdog_s=0.5,
+        )
+        for t, m, b, d in (
+            (
+                "evdev",
+                {"X": (0, 1), "Y": (1, -1)},
+                {1: "stop", 2: SimpleNamespace(name="zero")},
+                True,
+            ),
+            ("hidraw", {}, {}, False),
+        )
+    ],
+    "spacemouse._stop.reason": lambda: call_args("inputs/spacemouse.py", "_stop", 0),
+    "whb04b.self": _whb04b_selves,
+    "whb04b._wheel.self": lambda: [x for x in _whb04b_selves() if x._axis],
+    "whb04b._explain.text": SKIP,  # _explain's own parameter: its callers are the sites
 }
 
 #: Texts sent as they are, however English (an OS's error, a name the user gave, ...).
@@ -592,11 +753,27 @@ PASSTHROUGH = [
     "position, velocity",  # the handwheel modes and overrides, by their protocol names
     "feed, rapid",
     "reset, +10, -10",
+    *_DEVICE_NAMES,  # a device as it names itself, and its model
+    *(f"{kind} KTURT.LTD WHB04B" for kind in _DECODERS),
+    "docs/devices.md",
+    "ShuttleXpress",
+    "SpaceMouse Compact",
+    "WHB04B",
+    "KTURT.LTD",
+    "Xbox Wireless Controller",
+    "No such device",
+    "/dev/hidraw3",
+    "1=X 5=zero",  # button mappings, by the names the configuration gives them
+    "1=stop 2=zero",
+    "X=x Y=-y",
+    "--input whb04b",
+    "--input gamepad",
 ]
 #: Words the Chinese keeps: names, units, Grbl's states in its own spelling, acronyms.
 LATIN_OK = {
     "smoothjog", "Grbl", "grblHAL", "FluidNC", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
-    "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi",
+    "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi", "udev", "hidraw",
+    "evdev", "spacenavd", "Lead",
 }  # fmt: skip
 #: Grbl's own words: `error:15`, `$J=`, `$X`, G- and axis words, quoted values as sent.
 GRBL_WORDS = re.compile(
@@ -651,7 +828,7 @@ def _calls(name: str, *positions: int, keyword: str | None = None) -> Pick:
 
 def _returns(function: str, index: int | None = None) -> Pick:
     def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
-        if not (isinstance(node, ast.FunctionDef) and node.name == function):
+        if not (isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.name == function):
             return []
         return returned(mod, function, index)
 
@@ -718,10 +895,36 @@ def other_sites() -> list[Site]:
     ]
 
 
+@cache
+def decoder_sites() -> list[Site]:
+    """What each device's decoder says (DeviceNotice) and how it describes itself."""
+    out = []
+    for rel in _DECODERS:
+        out += _sites(f"inputs/{rel}.py", _calls("DeviceNotice", 0))
+        out += _sites(f"inputs/{rel}.py", _returns("describe"))
+    return [*out, *_sites("inputs/whb04b.py", _calls("_explain", 0))]
+
+
+@cache
+def device_sites() -> list[Site]:
+    """What the device manager and each device input tell every page (with the device's name)."""
+    return [
+        *decoder_sites(),
+        *_sites("devices.py", _calls("_tell", 0)),
+        *_sites("devices.py", _calls("_tell_once", 1)),
+        *_sites("devices.py", _returns("__call__")),
+        *_sites("inputs/discovery.py", _returns("_problem")),
+        *_sites("inputs/devinput.py", _calls("_tell", 0)),
+        *_sites("inputs/devinput.py", _returns("_loss_text")),
+        *_sites("inputs/hidraw_source.py", _calls("DeviceLost", 0)),
+        *_sites("inputs/evdev_source.py", _calls("DeviceLost", 0)),
+    ]
+
+
 def all_texts() -> list[tuple[str, str]]:
     """(where, text) for every sentence the page can show."""
     out = []
-    for site in [*fault_sites(), *jog_build_sites(), *other_sites()]:
+    for site in [*fault_sites(), *jog_build_sites(), *other_sites(), *device_sites()]:
         out += [(site.where, text) for text in site.texts]
     return out
 
@@ -767,6 +970,8 @@ def _english_left(zh: str) -> list[str]:
     for text in PASSTHROUGH:
         rest = rest.replace(text, " ")
     rest = GRBL_WORDS.sub(" ", rest)
+    rest = re.sub(r"`[^`]*`", " ", rest)  # a command line, kept as it is typed
+    rest = re.sub(r"\b(?:BTN|KEY)_\w+", " ", rest)  # a button as the kernel names it
     return [w for w in re.findall(r"[A-Za-z]{3,}", rest) if w not in LATIN_OK]
 
 
