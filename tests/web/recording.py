@@ -53,6 +53,7 @@ def default_view() -> dict[str, object]:
         ],
         "max_rate_mm_min": [3000.0, 3000.0, 1000.0],
         "speed_ratios": {"X": 1.0, "Y": 1.0, "Z": 0.25},
+        "default_speed": 0.25,
         "moving": False,
         "control": {
             "can_command": True,

@@ -445,3 +445,21 @@ async def test_layout_fits_labels_every_control_and_is_captured(
     await page.screenshot(path=str(artifacts / f"pendant-{name}.png"), full_page=name == "phone")
     await page.keyboard.up("ArrowRight")
     assert backend.jogs()
+
+
+async def test_the_speed_starts_at_the_machines_default_until_the_user_picks_one(
+    pendant: StartPendant, open_page: OpenPage
+) -> None:
+    p = await pendant()
+    p.backend.set_view(default_speed=0.6)  # [jog] default_speed = 0.6
+    page = await open_page(p.url)
+    await page.wait_for_selector("#speed-out:has-text('60 %')")
+    assert await page.locator("#speed").input_value() == "60"
+    # The user's own pick is kept in this browser, over the machine's default.
+    await page.locator("#speed").fill("35")
+    await page.locator("#speed").dispatch_event("input")
+    await page.reload()
+    await page.wait_for_selector("#conn.conn-up")
+    await page.wait_for_selector("#speed-out:has-text('35 %')")
+    await asyncio.sleep(0.3)  # views keep coming: the default must not win now
+    assert await page.locator("#speed").input_value() == "35"

@@ -129,7 +129,11 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
         )
         model = await session.start()
         print(format_summary(model), flush=True)
-        backend = SessionBackend(session, speed_ratios=config.jog.speed_ratios)
+        backend = SessionBackend(
+            session,
+            speed_ratios=config.jog.speed_ratios,
+            default_speed=config.jog.default_speed,
+        )
         # One arbiter for the session: every input (the pages now, devices beside them) asks
         # it for control, and it owns the dead-man lease and the stop when an input goes away.
         arbiter = Arbiter(backend)

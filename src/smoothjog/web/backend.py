@@ -38,6 +38,7 @@ VIEW_KEYS: frozenset[str] = frozenset(
         "keepouts",
         "max_rate_mm_min",
         "speed_ratios",
+        "default_speed",
         "moving",
         "control",
     }

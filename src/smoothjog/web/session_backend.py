@@ -38,9 +38,12 @@ class SessionBackend:
         *,
         speed_ratios: Mapping[str, float] | None = None,
         control: MachineControl | None = None,
+        default_speed: float = 0.5,
     ):
-        """Wrap a session whose start() has completed (and its machine control, if shared)."""
+        """Wrap a session whose start() has completed (and its machine control, if shared);
+        default_speed is the page's speed until its user picks one ([jog] default_speed)."""
         self.session = session
+        self.default_speed = default_speed
         self.control = control if control is not None else MachineControl(session)
         engine = session.engine
         if engine is None:
@@ -174,6 +177,7 @@ class SessionBackend:
             ],
             "max_rate_mm_min": list(limits.max_rate_mm_min),
             "speed_ratios": dict(self._ratios),
+            "default_speed": self.default_speed,
             "moving": session.busy() or (v.state not in (None, "Idle", "Alarm", "Sleep")),
             "control": self._control_view(),
         }

@@ -157,6 +157,11 @@ function onLink(figures) {
 
 function onMessage(msg) {
   if (msg.type === "view") {
+    if (!settings.speedChosen && Number.isFinite(msg.default_speed) && msg.default_speed > 0) {
+      // No speed picked in this browser yet: start at the machine's [jog] default_speed.
+      const percent = Math.round(msg.default_speed * 100);
+      if (percent !== settings.speedPercent) setSpeedPercent(percent, { byUser: false });
+    }
     view = msg;
     render();
     refresh();
@@ -339,12 +344,16 @@ function render() {
 
 // -- controls ---------------------------------------------------------------------------------
 
-function setSpeedPercent(p) {
+/** Set the speed; chosen by the user (kept in this browser) unless byUser is false. */
+function setSpeedPercent(p, { byUser = true } = {}) {
   settings.speedPercent = Math.min(100, Math.max(1, Math.round(p)));
   $("speed").value = String(settings.speedPercent);
   $("speed-out").textContent = `${settings.speedPercent} %`;
   mixer.setSpeed(settings.speedPercent / 100);
-  saveSettings(settings);
+  if (byUser) {
+    settings.speedChosen = true;
+    saveSettings(settings);
+  }
 }
 
 function stepSpeed(dir) {
@@ -674,7 +683,7 @@ buildOverrides();
 setLanguage(pickLanguage(settings.language));
 $("lang").value = language();
 applyLanguage(language());
-setSpeedPercent(settings.speedPercent);
+setSpeedPercent(settings.speedPercent, { byUser: false });
 for (const s of sticks) s.setDisabled(true);
 for (const b of document.querySelectorAll("[data-jog]")) b.disabled = true;
 refresh();

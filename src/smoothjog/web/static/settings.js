@@ -40,6 +40,8 @@ export function loadSettings() {
     gpDeadman: Boolean(raw.gpDeadman),
     gpDeadmanButton: num(raw.gpDeadmanButton, 0, 31, DEFAULTS.gpDeadmanButton),
     speedPercent: num(raw.speedPercent, 1, 100, DEFAULTS.speedPercent),
+    // Until the user picks a speed here, the server's [jog] default_speed is used.
+    speedChosen: num(raw.speedPercent, 1, 100, null) !== null,
     stepIndex: num(raw.stepIndex, 0, 3, DEFAULTS.stepIndex),
     inertial: Boolean(raw.inertial),
     language: typeof raw.language === "string" ? raw.language : "",
@@ -47,8 +49,11 @@ export function loadSettings() {
 }
 
 export function saveSettings(settings) {
+  // A speed the user never picked is not stored, so the server's default keeps applying.
+  const { speedChosen, ...kept } = settings;
+  if (!speedChosen) delete kept.speedPercent;
   try {
-    localStorage.setItem(STORAGE_KEY, JSON.stringify(settings));
+    localStorage.setItem(STORAGE_KEY, JSON.stringify(kept));
   } catch {
     // Private browsing may refuse storage; the settings then last for this page only.
   }
