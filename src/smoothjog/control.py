@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import re
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -26,6 +26,7 @@ from smoothjog.core.codes import describe_error
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.firmware import for_model
 from smoothjog.core.ledger import CONSOLE
+from smoothjog.core.realtime import OVERRIDE_KINDS, OVERRIDE_STEPS, OVERRIDES
 from smoothjog.core.responses import ErrorReply
 from smoothjog.host import Host
 from smoothjog.links.base import encode_line
@@ -47,20 +48,6 @@ SAFE_Z_BELOW_TOP_MM: Final = 1.0
 #: assumption: a clamp or vise is seldom taller; the user can change it in [pendant] safe_z_mm).
 DEFAULT_SAFE_Z_WORK_MM: Final = 10.0
 
-_OVERRIDES: Final[Mapping[tuple[str, str], bytes]] = {
-    ("feed", "reset"): realtime.FEED_OVR_RESET,
-    ("feed", "+10"): realtime.FEED_OVR_COARSE_PLUS,
-    ("feed", "-10"): realtime.FEED_OVR_COARSE_MINUS,
-    ("feed", "+1"): realtime.FEED_OVR_FINE_PLUS,
-    ("feed", "-1"): realtime.FEED_OVR_FINE_MINUS,
-    ("rapid", "100"): realtime.RAPID_OVR_RESET,
-    ("rapid", "50"): realtime.RAPID_OVR_MEDIUM,
-    ("rapid", "25"): realtime.RAPID_OVR_LOW,
-}
-OVERRIDE_KINDS: Final = tuple(sorted({kind for kind, _ in _OVERRIDES}))
-OVERRIDE_STEPS: Final[Mapping[str, tuple[str, ...]]] = {
-    kind: tuple(step for k, step in _OVERRIDES if k == kind) for kind in OVERRIDE_KINDS
-}
 
 _SETTING_LINE = re.compile(r"^\s*\$(\d+|[A-Za-z][\w/]*)\s*=", re.ASCII)
 _GCODE_LINE = re.compile(r"^\s*[GMTgmt]|^\s*[Nn]\d", re.ASCII)
@@ -168,7 +155,7 @@ class MachineControl:
 
     async def override(self, kind: str, step: str) -> CommandResult:
         """A feed or rapid override byte; the next reports' `Ov:` shows the new value."""
-        byte = _OVERRIDES.get((kind, step))
+        byte = OVERRIDES.get((kind, step))
         if byte is None:
             steps = OVERRIDE_STEPS.get(kind)
             if steps is None:

@@ -30,14 +30,13 @@ from smoothjog.inputs.device import (
     EvdevEvent,
     EvdevFrame,
     HidReport,
+    parse_command,
 )
 from smoothjog.inputs.recording import load_evtest, load_hidraw
 from smoothjog.inputs.shuttle import (
-    OVERRIDE_STEPS,
     ShuttleDecoder,
     ShuttleEvdevDecoder,
     counter_delta,
-    parse_command,
     parse_report,
 )
 
@@ -418,12 +417,15 @@ def test_command_buttons(action: str, held: int, expected: list[Action]) -> None
     assert feed(decoder, rep(0.2, buttons=held)) == []  # a release does nothing
 
 
-def test_override_steps_match_the_machine_side() -> None:
-    from smoothjog.control import OVERRIDE_STEPS as MACHINE_STEPS
+def test_every_override_the_machine_side_sends_is_a_button_command() -> None:
+    from smoothjog.core.realtime import OVERRIDES
 
-    assert {k: set(v) for k, v in OVERRIDE_STEPS.items()} == {
-        k: set(v) for k, v in MACHINE_STEPS.items()
-    }
+    for kind, step in OVERRIDES:
+        assert parse_command(f"override:{kind}:{step}") == DeviceCommand(
+            "override", kind=kind, step=step
+        )
+    with pytest.raises(ValueError, match="is not an override"):
+        parse_command("override:feed:+7")
 
 
 @pytest.mark.parametrize("text", ["X", "stop", "jump", ""])

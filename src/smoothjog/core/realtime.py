@@ -129,3 +129,25 @@ GRBLHAL_ALIASES: Final = _by_value(
         (GRBLHAL_FEED_HOLD, Realtime.FEED_HOLD),
     )
 )
+
+
+# --- overrides by name (what a page or a device button asks for)
+# ---------------------------------------------------------------------
+#: (kind, step) -> the byte: the feed and rapid overrides every Grbl 1.1 has.
+OVERRIDES: Final = MappingProxyType(
+    {
+        ("feed", "reset"): FEED_OVR_RESET,
+        ("feed", "+10"): FEED_OVR_COARSE_PLUS,
+        ("feed", "-10"): FEED_OVR_COARSE_MINUS,
+        ("feed", "+1"): FEED_OVR_FINE_PLUS,
+        ("feed", "-1"): FEED_OVR_FINE_MINUS,
+        ("rapid", "100"): RAPID_OVR_RESET,
+        ("rapid", "50"): RAPID_OVR_MEDIUM,
+        ("rapid", "25"): RAPID_OVR_LOW,
+    }
+)
+OVERRIDE_KINDS: Final = tuple(sorted({kind for kind, _ in OVERRIDES}))
+#: kind -> its steps, in the order above.
+OVERRIDE_STEPS: Final = MappingProxyType(
+    {kind: tuple(step for k, step in OVERRIDES if k == kind) for kind in OVERRIDE_KINDS}
+)

@@ -33,6 +33,8 @@ from typing import ClassVar, Literal, NamedTuple
 
 from smoothjog.core.intents import Intent
 from smoothjog.core.options import Table
+from smoothjog.core.realtime import OVERRIDE_STEPS
+from smoothjog.core.units import ALL_AXES
 
 # -- what a device produces ------------------------------------------------------------------
 
@@ -140,6 +142,57 @@ class DeviceNotice:
 
 
 Action = Intent | DeviceCommand | DeviceNotice
+
+
+def parse_command(text: str) -> DeviceCommand | None:
+    """A button's machine command ("home", "zero:XY", "override:feed:+10"), None if not one.
+
+    Raises ValueError, with the problem in words, for a malformed command. A bare "zero" has no
+    axes: the decoder fills in the ones it means.
+    """
+    head, _, rest = text.partition(":")
+    if head not in DEVICE_COMMANDS:
+        return None
+    if head == "zero":
+        axes = tuple(rest.upper())
+        bad = [a for a in axes if a not in ALL_AXES]
+        if bad:
+            raise ValueError(f'names no axis {bad[0]!r}: write e.g. "zero:XY" or "zero"')
+        return DeviceCommand("zero", axes=axes)
+    if head == "override":
+        kind, _, step = rest.partition(":")
+        if step not in OVERRIDE_STEPS.get(kind, ()):
+            choices = "; ".join(
+                f"override:{k}:{s}" for k, steps in OVERRIDE_STEPS.items() for s in steps
+            )
+            raise ValueError(f"is not an override: use one of {choices}")
+        return DeviceCommand("override", kind=kind, step=step)
+    if rest:
+        raise ValueError(f"takes nothing after {head!r}: write {head!r}")
+    return DeviceCommand(head)
+
+
+def read_command(
+    options: Table, where: str, value: object, axes: Sequence[str], alternatives: str
+) -> DeviceCommand:
+    """A button's machine command from the config; ConfigError naming `where` otherwise.
+
+    alternatives names the decoder's own actions for the message ("an axis letter, ...").
+    """
+    action = value.strip() if isinstance(value, str) else ""
+    try:
+        command = parse_command(action)
+    except ValueError as exc:
+        raise options.error(where, f"= {value!r} {exc}") from None
+    if command is None:
+        raise options.error(
+            where,
+            f"= {value!r} is not an action: use {alternatives} or one of "
+            f"{', '.join(DEVICE_COMMANDS)}",
+        )
+    if any(a not in axes for a in command.axes):
+        raise options.error(where, f"= {value!r}: the machine has {tuple(axes)}")
+    return command
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,7 @@ from smoothjog.inputs.device import (
     DeviceItem,
     DeviceNotice,
     EvdevFrame,
+    parse_command,
 )
 
 # -- key names -------------------------------------------------------------------------------
@@ -131,7 +132,6 @@ class _Jog:
 
 #: Actions handled inside the decoder (besides jogs and machine commands).
 _CONTROLS: Final = ("stop", "speed+", "speed-", "step")
-_OVERRIDE_KINDS: Final = ("feed", "rapid")
 
 _Binding = _Jog | DeviceCommand | str
 
@@ -184,9 +184,15 @@ def _parse_action(options: Table, where: str, text: Any, axes: Sequence[str]) ->
         return _Jog(axis, 1 if word[1] == "+" else -1) if axis in axes else None
     if low in _CONTROLS:
         return low
-    name, _, arg = low.partition(":")
-    if name == "zero":
-        chosen = tuple(arg.upper()) if arg else tuple(axes)
+    try:
+        command = parse_command(low)
+    except ValueError as exc:
+        raise options.error(where, f"= {word!r} {exc}") from None
+    if command is not None:
+        if command.name != "zero":
+            return command
+        # A bare "zero" on a keypad means every axis of the machine.
+        chosen = command.axes or tuple(axes)
         missing = [a for a in chosen if a not in axes]
         if missing:
             raise options.error(
@@ -194,16 +200,6 @@ def _parse_action(options: Table, where: str, text: Any, axes: Sequence[str]) ->
                 f"= {word!r} names {''.join(missing)}: the machine has {', '.join(axes)}",
             )
         return DeviceCommand("zero", axes=chosen)
-    if name == "override":
-        kind, _, step = arg.partition(":")
-        if kind not in _OVERRIDE_KINDS or not step:
-            raise options.error(
-                where, f"= {word!r} is not an override: write e.g. override:feed:+10"
-            )
-        # The step is checked by MachineControl, which owns the table of override bytes.
-        return DeviceCommand("override", kind=kind, step=step)
-    if name in DEVICE_COMMANDS and not arg:
-        return DeviceCommand(name)
     raise options.error(
         where,
         f"= {word!r} is not an action: use an axis and direction (X+, Z-), stop, speed+, "

@@ -42,7 +42,6 @@ from smoothjog.core.intents import (
 from smoothjog.core.options import Table
 from smoothjog.core.units import ALL_AXES
 from smoothjog.inputs.device import (
-    DEVICE_COMMANDS,
     EV_KEY,
     EV_REL,
     Action,
@@ -53,6 +52,7 @@ from smoothjog.inputs.device import (
     DeviceNotice,
     EvdevFrame,
     HidReport,
+    read_command,
 )
 
 #: A hidraw report: ring, counter, unused, buttons (u16 LE) (devices §6.1).
@@ -65,43 +65,8 @@ REL_WHEEL: Final = 8
 REL_WHEEL_HI_RES: Final = 11
 BTN_0: Final = 0x100
 
-#: Override steps by kind, as control.OVERRIDE_STEPS has them (a test keeps the two equal; the
-#: decoders do not import the machine side).
-OVERRIDE_STEPS: Final[Mapping[str, tuple[str, ...]]] = {
-    "feed": ("reset", "+10", "-10", "+1", "-1"),
-    "rapid": ("100", "50", "25"),
-}
-
 DEFAULT_RING_SPEEDS: Final = (0.01, 0.03, 0.07, 0.15, 0.3, 0.6, 1.0)
 DEFAULT_STEPS_MM: Final = (0.01, 0.1, 1.0)
-
-
-def parse_command(text: str) -> DeviceCommand | None:
-    """A button's machine command ("home", "zero:XY", "override:feed:+10"), None if not one.
-
-    Raises ValueError, with the problem in words, for a malformed command. A bare "zero" has no
-    axes: the decoder fills in the ones it means.
-    """
-    head, _, rest = text.partition(":")
-    if head not in DEVICE_COMMANDS:
-        return None
-    if head == "zero":
-        axes = tuple(rest.upper())
-        bad = [a for a in axes if a not in ALL_AXES]
-        if bad:
-            raise ValueError(f'names no axis {bad[0]!r}: write e.g. "zero:XY" or "zero"')
-        return DeviceCommand("zero", axes=axes)
-    if head == "override":
-        kind, _, step = rest.partition(":")
-        if step not in OVERRIDE_STEPS.get(kind, ()):
-            choices = "; ".join(
-                f"override:{k}:{s}" for k, steps in OVERRIDE_STEPS.items() for s in steps
-            )
-            raise ValueError(f"is not an override: use one of {choices}")
-        return DeviceCommand("override", kind=kind, step=step)
-    if rest:
-        raise ValueError(f"takes nothing after {head!r}: write {head!r}")
-    return DeviceCommand(head)
 
 
 @dataclass(frozen=True)
@@ -233,19 +198,8 @@ class _Shuttle(Decoder):
             elif action in ("stop", "step"):
                 table[number] = _Button("stop" if action == "stop" else "step")
             else:
-                try:
-                    command = parse_command(action)
-                except ValueError as exc:
-                    raise options.error(where, f"= {value!r} {exc}") from None
-                if command is None:
-                    raise options.error(
-                        where,
-                        f'= {value!r} is not an action: use an axis letter, "stop", "step", '
-                        f'"none" or one of {", ".join(DEVICE_COMMANDS)}',
-                    )
-                missing = [a for a in command.axes if a not in self.axes]
-                if missing:
-                    raise options.error(where, f"= {value!r}: the machine has {self.axes}")
+                alternatives = 'an axis letter, "stop", "step", "none"'
+                command = read_command(options, where, value, self.axes, alternatives)
                 table[number] = _Button("command", command=command)
         return table
 
@@ -600,6 +554,5 @@ __all__ = [
     "ShuttleModel",
     "ShuttleReport",
     "counter_delta",
-    "parse_command",
     "parse_report",
 ]

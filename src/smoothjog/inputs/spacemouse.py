@@ -30,7 +30,6 @@ from smoothjog.core.intents import ContinuousIntent, StopIntent
 from smoothjog.core.options import Table
 from smoothjog.core.units import ALL_AXES
 from smoothjog.inputs.device import (
-    DEVICE_COMMANDS,
     EV_ABS,
     EV_KEY,
     EV_REL,
@@ -43,11 +42,9 @@ from smoothjog.inputs.device import (
     DeviceNotice,
     EvdevFrame,
     HidReport,
+    read_command,
 )
 from smoothjog.inputs.shaping import clamp_unit, deadzone, expo, normalise
-
-# parse_command is shared with the Shuttle; it belongs in a shared module (see the report).
-from smoothjog.inputs.shuttle import parse_command
 
 #: The six raw channels, in report order (the index is also the evdev REL_/ABS_ code).
 SOURCES: Final = ("x", "y", "z", "rx", "ry", "rz")
@@ -169,19 +166,8 @@ class _SpaceMouse(Decoder):
             if action in _ACTIONS:
                 table[number] = action
                 continue
-            try:
-                command = parse_command(action)
-            except ValueError as exc:
-                raise options.error(where, f"= {value!r} {exc}") from None
-            if command is None:
-                raise options.error(
-                    where,
-                    f"= {value!r} is not an action: use {', '.join(_ACTIONS)}, none, or one of "
-                    f"{', '.join(DEVICE_COMMANDS)}",
-                )
-            if any(a not in self.axes for a in command.axes):
-                raise options.error(where, f"= {value!r}: the machine has {self.axes}")
-            table[number] = command
+            alternatives = f"{', '.join(_ACTIONS)}, none,"
+            table[number] = read_command(options, where, value, self.axes, alternatives)
         return table
 
     def _reset(self) -> None:
