@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
+import os
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
-from typing import Protocol
+from typing import Final, Protocol
 
 from smoothjog.core.errors import InputRefused, SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
@@ -48,6 +50,17 @@ DISPLAY_PERIOD_S = 0.2
 
 class DeviceLost(SmoothjogError):  # noqa: N818 -- a loss told in words, as InputRefused
     """A device cannot be read any more; the text says why (unplugged, read error, ...)."""
+
+
+#: Read errors that mean the device is gone (unplugged, asleep), not a passing failure.
+GONE_ERRNOS: Final = frozenset({errno.EIO, errno.ENODEV, errno.ENXIO, errno.EBADF})
+
+
+def read_loss(exc: OSError, gone: str) -> DeviceLost:
+    """The DeviceLost a live reader raises for a failed read; gone says how it went."""
+    if exc.errno in GONE_ERRNOS:
+        return DeviceLost(f"{gone} ({os.strerror(exc.errno or 0)})")
+    return DeviceLost(f"read error: {exc.strerror}")
 
 
 class DeviceSource(Protocol):

@@ -17,9 +17,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
-import os
 from collections.abc import AsyncIterator, Iterable
-from typing import Any, Final
+from typing import Any
 
 from smoothjog.inputs.device import (
     EV_ABS,
@@ -30,10 +29,8 @@ from smoothjog.inputs.device import (
     EvdevEvent,
     EvdevFrame,
 )
-from smoothjog.inputs.devinput import DeviceLost
+from smoothjog.inputs.devinput import read_loss
 from smoothjog.inputs.frames import FrameAssembler
-
-GONE_ERRNOS: Final = frozenset({errno.ENODEV, errno.EIO, errno.ENXIO, errno.EBADF})
 
 
 def evdev_info(device: Any) -> DeviceInfo:
@@ -110,11 +107,7 @@ class EvdevSource:
                 except BlockingIOError:
                     continue
                 except OSError as exc:
-                    if exc.errno in GONE_ERRNOS:
-                        raise DeviceLost(
-                            f"unplugged or asleep ({os.strerror(exc.errno or 0)})"
-                        ) from None
-                    raise DeviceLost(f"read error: {exc.strerror}") from None
+                    raise read_loss(exc, "unplugged or asleep") from None
                 now = loop.time()
                 for ev in events:
                     # The kernel stamps every event of a frame alike: its own time keeps a frame

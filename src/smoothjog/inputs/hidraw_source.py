@@ -22,7 +22,7 @@ from collections.abc import AsyncIterator
 from typing import Final
 
 from smoothjog.inputs.device import DeviceInfo, HidReport
-from smoothjog.inputs.devinput import DeviceLost
+from smoothjog.inputs.devinput import DeviceLost, read_loss
 
 #: The largest report any supported device sends (the SpaceMouse's 13 bytes, the WHB04B's 8).
 READ_SIZE: Final = 64
@@ -47,10 +47,6 @@ def hidiocgrawname(length: int) -> int:
 def hidiocsfeature(length: int) -> int:
     """HIDIOCSFEATURE(len): send a feature report whose first byte is its number."""
     return _ioc(_IOC_WRITE | _IOC_READ, 0x06, length)
-
-
-#: Errors that mean the device is gone, not a passing failure.
-GONE_ERRNOS: Final = frozenset({errno.EIO, errno.ENODEV, errno.ENXIO, errno.EBADF})
 
 
 def read_hidraw_info(fd: int, path: str) -> DeviceInfo:
@@ -107,11 +103,7 @@ class HidrawSource:
                     except BlockingIOError:
                         break
                     except OSError as exc:
-                        if exc.errno in GONE_ERRNOS:
-                            raise DeviceLost(
-                                f"unplugged or switched off ({os.strerror(exc.errno or 0)})"
-                            ) from None
-                        raise DeviceLost(f"read error: {exc.strerror}") from None
+                        raise read_loss(exc, "unplugged or switched off") from None
                     if not data:
                         raise DeviceLost("the device closed (end of file)")
                     yield HidReport(loop.time(), data)
