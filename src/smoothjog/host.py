@@ -39,7 +39,7 @@ from smoothjog.core.jogger import (
     SendLine,
     SendRealtime,
 )
-from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger
+from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import JOG_CANCEL
 from smoothjog.core.responses import (
@@ -181,6 +181,8 @@ class Host:
         self._room = asyncio.Event()
         self._write_lock = asyncio.Lock()
         self._reading = True
+        if self.link.attach_relay(self._on_wire_line, self._on_jog_lock):
+            self.ledger.relayed = True
         # Lines come straight from the link's read callback where it can give them (one task
         # switch fewer per line); a reader task otherwise.
         if not self.link.subscribe(self._on_link_line, self._on_link_end):
@@ -426,7 +428,8 @@ class Host:
             await handshake(port, timeout_s=self.handshake_timeout_s, model=self.model, feed=False)
         finally:
             self._port = None
-        self.ledger.capacity_bytes = self.model.rx_buffer_bytes
+        # A relay's own unseen lines (CNCjs's `$G` poll) take RX bytes smoothjog cannot count.
+        self.ledger.capacity_bytes = self.model.rx_buffer_bytes - self.link.rx_reserve_bytes()
 
     async def _reader(self) -> None:
         """For a link that cannot deliver lines by callback."""
@@ -440,6 +443,18 @@ class Host:
         if self._reading:
             with self._stops_the_host():
                 self._on_line(raw, self.now_s())
+
+    def _on_wire_line(self, text: str, writer: str) -> None:
+        """A relay put a line on the wire: confirm an own one or count a foreign writer's."""
+        if self._reading:
+            self.ledger.on_echo(text, foreign(writer), self.now_s())
+
+    def _on_jog_lock(self, reason: str | None) -> None:
+        """Another program took or gave back the machine (a CNCjs job began or ended)."""
+        if reason != self.model.jog_lock:
+            logger.info("jogging %s", f"waits: {reason}" if reason else "may go on again")
+        self.model.jog_lock = reason
+        self._poke()
 
     def _on_link_end(self, error: LinkError) -> None:
         """The link is gone (or was closed under the host)."""

@@ -824,6 +824,8 @@ class Jogger:
         try:
             if self.phase is Phase.JOGGING:
                 if not self._may_jog():
+                    if self.model.jog_lock is not None:
+                        self._fault_now(now_s, f"jogging stopped: {self.model.jog_lock}", "")
                     self._begin_stop(now_s)
                 else:
                     self._stream(now_s, out)
@@ -2184,6 +2186,8 @@ class Jogger:
 
     def can_jog(self) -> tuple[bool, str | None]:
         """Whether a jog may be sent now, and why not in words."""
+        if self.model.jog_lock is not None:
+            return False, self.model.jog_lock
         state = self.model.state
         if state is None:
             return False, "waiting for the controller's first status report"

@@ -9,6 +9,13 @@ Owners are short names: `handshake`, `engine`, `console`, or `foreign:NAME` for 
 lines smoothjog forwards without having written them (a second program on the same controller).
 Status reports, alarms, `[MSG:]` and banners belong to nobody; the host fans them out to all.
 
+Over a relay that several clients write through (CNCjs), the order in which lines reach the
+controller is the relay's, not smoothjog's: the relay echoes every client's line, in wire order,
+before it writes it. A relayed ledger (`relayed=True`) therefore keeps smoothjog's own lines
+"not yet on the wire" until their echo comes (`on_echo`), and puts a line echoed for somebody else
+(a foreign writer) just before the first of its own lines still waiting for theirs: that is where
+it went on the wire. Replies then pop the oldest line as everywhere else.
+
 Pure bookkeeping: no I/O, no clock (the caller passes `now_s`).
 """
 
@@ -54,6 +61,8 @@ class Entry:
     sent_s: float
     #: Whatever the owner wants back with the reply (the engine keeps its line's kind here).
     tag: object = None
+    #: False while a relayed line waits for the relay's echo (it may not be on the wire yet).
+    on_wire: bool = True
 
 
 @dataclass
@@ -70,17 +79,29 @@ class LedgerStats:
     lost_to_reset: int = 0
     #: Lines whose reply never came and was presumed lost (a garbled or dropped `ok`).
     presumed_answered: int = 0
+    #: Relayed: own lines the relay never echoed (a later own line's echo came first).
+    unechoed_dropped: int = 0
+    #: Relayed: replies that arrived while the oldest line still waited for its echo.
+    replies_before_echo: int = 0
 
 
 class Ledger:
     """Unanswered lines of every owner, oldest first, counted against the RX buffer."""
 
-    def __init__(self, capacity_bytes: int = DEFAULT_RX_BYTES) -> None:
-        """An empty ledger for a controller whose RX buffer holds capacity_bytes."""
+    def __init__(self, capacity_bytes: int = DEFAULT_RX_BYTES, *, relayed: bool = False) -> None:
+        """An empty ledger for a controller whose RX buffer holds capacity_bytes.
+
+        relayed=True: the link is a relay that echoes every client's line in wire order, and
+        own lines count as on the wire only once on_echo() has seen them.
+        """
         self._capacity_bytes = DEFAULT_RX_BYTES
         self.capacity_bytes = capacity_bytes
+        self.relayed = relayed
         self._entries: collections.deque[Entry] = collections.deque()
         self._in_flight_bytes = 0
+        # The entries still waiting for their echo: always the newest ones (echoes come in
+        # order, and a foreign line goes in front of them).
+        self._unechoed = 0
         self.stats = LedgerStats()
 
     @property
@@ -119,10 +140,40 @@ class Ledger:
                 f"{owner}'s line {text!r} needs {cost} bytes but only {self.free_bytes} of the"
                 f" controller's {self._capacity_bytes}-byte RX buffer are free"
             )
-        entry = Entry(owner, text, cost, now_s, tag)
+        entry = Entry(owner, text, cost, now_s, tag, on_wire=not self.relayed)
         self._entries.append(entry)
         self._in_flight_bytes += cost
+        self._unechoed += self.relayed
         self.stats.lines[owner] += 1
+        return entry
+
+    def on_echo(self, text: str, foreign_owner: str, now_s: float) -> Entry:
+        """The relay echoed a line (it goes on the wire now); return its entry.
+
+        The oldest own line still waiting for its echo is the one echoed when the text is the
+        same; any other line is a foreign writer's, counted in the RX buffer from now on (even
+        past its size: the bytes are there whether they fit or not) and answered before the own
+        lines not echoed yet. An own line further back with this text means the lines before it
+        were never relayed: they are dropped, since no reply will come for them.
+        """
+        first = len(self._entries) - self._unechoed
+        for index in range(first, len(self._entries)):
+            entry = self._entries[index]
+            if entry.text != text:
+                continue
+            skipped = index - first
+            for _ in range(skipped):
+                gone = self._entries[first]
+                del self._entries[first]
+                self._in_flight_bytes -= gone.cost
+            self._unechoed -= skipped + 1
+            self.stats.unechoed_dropped += skipped
+            entry.on_wire = True
+            return entry
+        entry = Entry(foreign_owner, text, line_cost_bytes(text), now_s)
+        self._entries.insert(first, entry)
+        self._in_flight_bytes += entry.cost
+        self.stats.lines[foreign_owner] += 1
         return entry
 
     def record_realtime(self, owner: str, byte: bytes) -> None:
@@ -136,6 +187,10 @@ class Ledger:
             return None
         entry = self._entries.popleft()
         self._in_flight_bytes -= entry.cost
+        if not entry.on_wire:
+            # The relay's echo order broke its promise (or a writer bypassed it): go on.
+            self._unechoed -= 1
+            self.stats.replies_before_echo += 1
         self.stats.replies[entry.owner] += 1
         return entry
 
@@ -150,6 +205,7 @@ class Ledger:
         dropped = len(self._entries) - len(kept)
         self._entries = kept
         self._in_flight_bytes = sum(e.cost for e in kept)
+        self._unechoed = sum(1 for e in kept if not e.on_wire)
         self.stats.presumed_answered += dropped
         return dropped
 
@@ -168,5 +224,6 @@ class Ledger:
         dropped = list(self._entries)
         self._entries.clear()
         self._in_flight_bytes = 0
+        self._unechoed = 0
         self.stats.lost_to_reset += len(dropped)
         return dropped

@@ -298,6 +298,9 @@ class MachineModel:
     last_error: int | None = None
     last_message: str | None = None
     keep_outs: tuple[KeepOut, ...] = ()
+    #: Why jogging must wait, when the reason is another program's and the controller's state
+    #: may not show it (a CNCjs job between two of its lines reports Idle); None: no such reason.
+    jog_lock: str | None = None
     #: Status reports whose axis count differed from the controller's (damaged on the wire).
     damaged_reports: int = 0
     _axis_letters: tuple[str, ...] | None = field(default=None, init=False, repr=False)

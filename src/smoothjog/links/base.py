@@ -295,6 +295,24 @@ class Link(ABC):
         """Wire time of one byte from the controller, when the link knows it (None if not)."""
         return None
 
+    def attach_relay(
+        self,
+        on_wire_line: Callable[[str, str], None],
+        on_jog_lock: Callable[[str | None], None],
+    ) -> bool:
+        """For a relay other clients write through too (CNCjs); False for a link of one writer.
+
+        A relay calls on_wire_line(text, writer) for every line it puts on the controller's
+        wire, its own and other clients', in wire order (the ledger places foreign lines by it),
+        and on_jog_lock(reason) when jogging must wait for another program, None when it may
+        go on.
+        """
+        return False
+
+    def rx_reserve_bytes(self) -> int:
+        """RX-buffer bytes kept for lines the far side writes without telling (0: none)."""
+        return 0
+
     def cork(self) -> None:  # noqa: B027 - optional: most links write at once
         """Hold what is sent from now on until uncork(), to write it in one go."""
 
