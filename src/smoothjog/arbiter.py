@@ -249,6 +249,15 @@ class Arbiter:
                 log.exception("%s could not be told of its dead-man trip", name)
         return True
 
+    def machine_lost(self) -> None:
+        """The link to the controller went away: forget the held jog, and make the input that
+        held it let go and press again, so a stick still held does not move the machine the
+        moment the link is back."""
+        holder = self._controller
+        if self._holding and holder is not None:
+            self._tripped.add(holder)
+        self._halt("the link to the controller was lost")
+
     # -- the rules behind the handles --------------------------------------------------------
 
     def _submit(self, handle: _Handle, intent: Intent, now_s: float) -> None:

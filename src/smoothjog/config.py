@@ -21,6 +21,7 @@ from smoothjog.core.firmware import DEFAULT_BAUD, FIRMWARE_NAMES
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.options import Table
 from smoothjog.core.units import ALL_AXES
+from smoothjog.links.cncjs import parse_cncjs_url
 from smoothjog.links.tcp import parse_tcp_url
 
 #: Environment variable naming a config file when none is given on the command line.
@@ -40,6 +41,12 @@ class ConnectionConfig:
     baud: int = DEFAULT_BAUD
     connect: str | None = None  # tcp://HOST:PORT
     timeout_s: float = 5.0
+    # Through a CNCjs server that owns the port (links/cncjs.py, docs/cncjs.md).
+    cncjs: str | None = None  # http://HOST:PORT of CNCjs
+    cncjs_port: str | None = None  # the controller's port as CNCjs names it
+    cncjs_config: str | None = None  # CNCjs's config file, for its secret (~/.cncrc if None)
+    cncjs_token: str | None = None  # a token instead of signing one
+    cncjs_user: str | None = None  # the CNCjs user the token names, when users are configured
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,17 +116,39 @@ def _connection(table: Table) -> ConnectionConfig:
     """Read [connection]."""
     port = table.text("port", None)
     connect = table.text("connect", None)
+    cncjs = table.text("cncjs", None)
     if port is not None and connect is not None:
         raise table.error("connect", "and port are both set: keep the one you use")
+    if cncjs is not None and (port is not None or connect is not None):
+        raise table.error("cncjs", "is set beside port or connect: keep the one you use")
     if connect is not None:
         try:
             parse_tcp_url(connect)
         except LinkError as exc:
             raise table.error("connect", f"is wrong: {exc}") from None
+    if cncjs is not None:
+        try:
+            parse_cncjs_url(cncjs)
+        except LinkError as exc:
+            raise table.error("cncjs", f"is wrong: {exc}") from None
     baud = table.integer("baud", DEFAULT_BAUD, at_least=1, at_most=10_000_000)
     timeout_s = table.number("timeout_s", 5.0, above=0.0, at_most=MAX_TIMEOUT_S)
+    cncjs_port = table.text("cncjs_port", None)
+    cncjs_config = table.text("cncjs_config", None)
+    cncjs_user = table.text("cncjs_user", None)
+    if cncjs is not None and cncjs_port is None:
+        raise table.error("cncjs", "needs cncjs_port: the controller's port as CNCjs names it")
     table.finish()
-    return ConnectionConfig(port=port, baud=baud, connect=connect, timeout_s=timeout_s)
+    return ConnectionConfig(
+        port=port,
+        baud=baud,
+        connect=connect,
+        timeout_s=timeout_s,
+        cncjs=cncjs,
+        cncjs_port=cncjs_port,
+        cncjs_config=cncjs_config,
+        cncjs_user=cncjs_user,
+    )
 
 
 def _jog(table: Table) -> JogConfig:

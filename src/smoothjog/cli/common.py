@@ -1,6 +1,7 @@
 """Options every subcommand that talks to a controller shares, and picking the link they ask for.
 
-`--port`/`--baud` choose a serial port, `--connect tcp://HOST:PORT` a network controller; the
+`--port`/`--baud` choose a serial port, `--connect tcp://HOST:PORT` a network controller,
+`--cncjs http://HOST:PORT --cncjs-port PATH` a controller behind a running CNCjs server; the
 command line wins over the config file's [connection], which wins over the defaults. Neither a
 port nor an address means "use the built-in simulator": `open_link` then returns None and the
 caller decides (most use `simulator_link`).
@@ -13,7 +14,10 @@ from dataclasses import replace
 
 from smoothjog.config import Config, ConnectionConfig, load_config
 from smoothjog.core.firmware import DEFAULT_BAUD
+from smoothjog.core.errors import LinkError
 from smoothjog.links.base import Link
+from smoothjog.links.cncjs import CncjsLink
+from smoothjog.links.cncjs_auth import make_token
 from smoothjog.links.serial import DEFAULT_WAIT_BANNER_S, SerialLink
 from smoothjog.links.sim import SimLink
 from smoothjog.links.tcp import TcpLink, parse_tcp_url
@@ -57,6 +61,31 @@ def add_connection_args(parser: argparse.ArgumentParser) -> None:
         metavar="URL",
         help="network controller as tcp://HOST:PORT (FluidNC, ESP32 Grbl, grblHAL telnet)",
     )
+    where.add_argument(
+        "--cncjs",
+        metavar="URL",
+        help="a CNCjs server that owns the controller's port, e.g. http://127.0.0.1:8000"
+        " (smoothjog joins it as a pendant; see docs/cncjs.md)",
+    )
+    group.add_argument(
+        "--cncjs-port",
+        metavar="PATH",
+        help="with --cncjs: the controller's port as CNCjs names it, e.g. /dev/ttyUSB0",
+    )
+    group.add_argument(
+        "--cncjs-config",
+        metavar="FILE",
+        help="with --cncjs: CNCjs's config file, whose secret signs the token (default ~/.cncrc,"
+        " or $CNCJS_SECRET)",
+    )
+    group.add_argument(
+        "--cncjs-token", metavar="TOKEN", help="with --cncjs: a token to use instead of signing one"
+    )
+    group.add_argument(
+        "--cncjs-user",
+        metavar="NAME",
+        help="with --cncjs: the CNCjs user the token names, when CNCjs has users configured",
+    )
     group.add_argument(
         "--baud",
         type=_positive_int,
@@ -88,9 +117,14 @@ def connection_from_args(
     base = (config if config is not None else config_from_args(args)).connection
     port: str | None = getattr(args, "port", None)
     connect: str | None = getattr(args, "connect", None)
-    if port is not None or connect is not None:
+    cncjs: str | None = getattr(args, "cncjs", None)
+    if port is not None or connect is not None or cncjs is not None:
         # Naming a controller on the command line replaces the config's choice entirely.
-        base = replace(base, port=port, connect=connect)
+        base = replace(base, port=port, connect=connect, cncjs=cncjs)
+    for key in ("cncjs_port", "cncjs_config", "cncjs_token", "cncjs_user"):
+        value = getattr(args, key, None)
+        if value is not None:
+            base = replace(base, **{key: value})
     baud: int | None = getattr(args, "baud", None)
     timeout_s: float | None = getattr(args, "timeout", None)
     if baud is not None:
@@ -101,7 +135,28 @@ def connection_from_args(
 
 
 def link_for(connection: ConnectionConfig) -> Link | None:
-    """The (unopened) link a connection names; None for the built-in simulator."""
+    """The (unopened) link a connection names; None for the built-in simulator.
+
+    A CNCjs link's token is made here, so a missing secret is told before anything connects.
+    """
+    if connection.cncjs is not None:
+        if not connection.cncjs_port:
+            raise LinkError(
+                "--cncjs needs --cncjs-port: the controller's port as CNCjs names it, e.g."
+                " /dev/ttyUSB0 (CNCjs's port list shows it)"
+            )
+        token = make_token(
+            token=connection.cncjs_token,
+            config_path=connection.cncjs_config,
+            user=connection.cncjs_user,
+        )
+        return CncjsLink(
+            connection.cncjs,
+            connection.cncjs_port,
+            token,
+            baud=connection.baud,
+            timeout_s=connection.timeout_s,
+        )
     if connection.connect is not None:
         host, port = parse_tcp_url(connection.connect)
         return TcpLink(host, port, connect_timeout_s=connection.timeout_s)

@@ -1,8 +1,9 @@
 """`smoothjog pendant` (the default command): a controller, the jog engine and the web pendant.
 
-Without --port or --connect it drives the built-in simulated Grbl machine in real time, so the
-pendant can be tried with no machine at all. Ctrl-C stops any jog with the full cancel handshake
-and shuts down cleanly.
+Without --port, --connect or --cncjs it drives the built-in simulated Grbl machine in real time,
+so the pendant can be tried with no machine at all. When the link to a controller is lost (a
+CNCjs restart, a cable pulled) the pendant stays up, says so, and connects again every
+RECONNECT_S. Ctrl-C stops any jog with the full cancel handshake and shuts down cleanly.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import asyncio
 import contextlib
 import signal
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from smoothjog.arbiter import Arbiter
@@ -22,6 +24,7 @@ from smoothjog.cli.common import (
     link_for,
 )
 from smoothjog.config import DEFAULT_HTTP_PORT, Config
+from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.firmware import FIRMWARE_NAMES
 from smoothjog.core.jogger import EngineEvent, JogTuning
 from smoothjog.devices import DeviceManager, MachineCommands, check_device_configs, machine_view
@@ -34,6 +37,12 @@ from smoothjog.sim.profiles import available_machine_profiles, get_firmware_prof
 from smoothjog.web.protocol import PendantError
 from smoothjog.web.server import is_loopback, run_pendant
 from smoothjog.web.session_backend import SessionBackend
+
+
+#: Seconds between attempts to open a lost link again.
+RECONNECT_S = 2.0
+#: How often the supervisor looks at the link (a lost link has already stopped the engine).
+WATCH_S = 0.25
 
 
 def register(subparsers: Any) -> None:
@@ -95,7 +104,10 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"smoothjog: no controller given: using the built-in simulator ({firmware}, {machine})"
         )
-    return asyncio.run(_serve(link, config, args, connection.timeout_s))
+        make_link: Callable[[], Link] | None = None  # the simulator lives in this process
+    else:
+        make_link = lambda: link_for(connection)  # noqa: E731 - a new token, a new link
+    return asyncio.run(_serve(link, config, args, connection.timeout_s, make_link))
 
 
 def _print_notice(text: str, arbiter: Arbiter) -> None:
@@ -110,23 +122,72 @@ def _print_event(event: EngineEvent) -> None:
         print(f"smoothjog: {event.text}{hint}", file=sys.stderr, flush=True)
 
 
-async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s: float) -> int:
+def _make_host(link: Link, config: Config, timeout_s: float) -> Host:
+    return Host(
+        link,
+        tuning=JogTuning(
+            speed_ratios=dict(config.jog.speed_ratios),
+            link_margin_s=config.jog.link_margin_s,
+        ),
+        keepouts=config.keepouts,
+        handshake_timeout_s=timeout_s,
+        on_event=_print_event,
+    )
+
+
+async def _keep_connected(
+    backend: SessionBackend,
+    arbiter: Arbiter,
+    make_link: Callable[[], Link | None],
+    config: Config,
+    timeout_s: float,
+) -> None:
+    """Open the link again whenever it is lost, and hand the pendant the new session."""
+    while True:
+        session = backend.session
+        while session.link_error is None and session.error is None:
+            await asyncio.sleep(WATCH_S)
+        why = session.link_error or session.error
+        arbiter.machine_lost()
+        print(f"smoothjog: {why}; connecting again every {RECONNECT_S:g} s", file=sys.stderr)
+        await session.close()
+        last = ""
+        while True:
+            await asyncio.sleep(RECONNECT_S)
+            link = make_link()
+            if link is None:
+                return
+            try:
+                await link.open()
+                fresh = _make_host(link, config, timeout_s)
+                await fresh.start()
+            except (SmoothjogError, OSError) as exc:
+                with contextlib.suppress(SmoothjogError, OSError):
+                    await link.close()
+                if str(exc) != last:  # said once, not every attempt
+                    print(f"smoothjog: not connected yet: {exc}", file=sys.stderr, flush=True)
+                    last = str(exc)
+                continue
+            backend.attach(fresh)
+            print(f"smoothjog: connected again to {link.describe()}", file=sys.stderr, flush=True)
+            arbiter.announce(f"connected again to {link.describe()}")
+            break
+
+
+async def _serve(
+    link: Link,
+    config: Config,
+    args: argparse.Namespace,
+    timeout_s: float,
+    make_link: Callable[[], Link | None] | None = None,
+) -> int:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     async with link:
-        session = Host(
-            link,
-            tuning=JogTuning(
-                speed_ratios=dict(config.jog.speed_ratios),
-                link_margin_s=config.jog.link_margin_s,
-            ),
-            keepouts=config.keepouts,
-            handshake_timeout_s=timeout_s,
-            on_event=_print_event,
-        )
+        session = _make_host(link, config, timeout_s)
         model = await session.start()
         print(format_summary(model), flush=True)
         backend = SessionBackend(
@@ -145,12 +206,18 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
         )
         waiter = asyncio.create_task(stop.wait())
         tasks = [server, waiter]
+        if make_link is not None:
+            tasks.append(
+                asyncio.create_task(
+                    _keep_connected(backend, arbiter, make_link, config, timeout_s)
+                )
+            )
         if args.input or config.devices:
             manager = DeviceManager(
                 arbiter,
                 wishes=args.input,
                 configs=config.devices,
-                axes=lambda: session.model.axis_letters,
+                axes=lambda: backend.session.model.axis_letters,
                 commands=MachineCommands(backend.control),
                 view=machine_view(backend.control),
                 notices=lambda text: _print_notice(text, arbiter),
@@ -162,7 +229,7 @@ async def _serve(link: Link, config: Config, args: argparse.Namespace, timeout_s
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
-            await session.close()  # always: stop any jog with the handshake, then let go
+            await backend.session.close()  # always: stop any jog with the handshake, let go
         if not server.cancelled() and server.exception() is not None:
             raise server.exception()  # type: ignore[misc]  # e.g. the PendantError sentence
     print("smoothjog: stopped", flush=True)

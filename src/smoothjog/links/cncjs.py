@@ -311,7 +311,13 @@ class CncjsLink(Link):
         if isinstance(data, dict) and data.get("port") not in (None, self.port):
             return
         detail = data.get("err") if isinstance(data, dict) else data
-        self._lost(f"CNCjs reports an error on {self.port}: {detail or 'no detail given'}")
+        if self._writer_task is None:  # still opening: CNCjs could not open the port
+            self._lost(
+                f"CNCjs could not open {self.port}{f' ({detail})' if detail else ''}: check the"
+                " port's name (CNCjs's port list shows it) and that no other program holds it"
+            )
+        else:
+            self._lost(f"CNCjs reports an error on {self.port}: {detail or 'no detail given'}")
 
     def _on_workflow(self, state: object = None) -> None:
         if not isinstance(state, str):

@@ -52,6 +52,16 @@ class SessionBackend:
         if speed_ratios:
             self.set_speed_ratios(speed_ratios)
 
+    def attach(self, session: Host) -> None:
+        """Drive a new session (the link was lost and opened again): same page, same ratios."""
+        if session.engine is None:
+            raise RuntimeError("SessionBackend needs a started Host")
+        self.session = session
+        self.control.host = session
+        self.set_speed_ratios(
+            {axis: r for axis, r in self._ratios.items() if axis in session.engine.limits.axes}
+        )
+
     # ------------------------------------------------------------------ intents
     def set_intent(self, intent: Intent) -> None:
         """Hand the engine the newest intent (the arbiter already let it through)."""
