@@ -54,11 +54,16 @@ def test_cli_pty_answers_like_grbl_and_cleans_up(tmp_path: Path) -> None:
             port.write(b"?")
             report = _read_until(port, lambda x: x.startswith("<"))[-1]
             assert report.startswith("<Idle|MPos:0.000,0.000,0.000|FS:0,0")
+            port.write(b"$Q\n")  # a bad system command: error:2 here, counted in the summary
+            assert _read_until(port, lambda x: x.startswith("error"))[-1] == "error:2"
     finally:
         proc.send_signal(signal.SIGINT)
         _out, err = proc.communicate(timeout=10)
     assert proc.returncode == 0
-    assert "stopped on SIGINT" in err
+    assert (
+        "stopped on SIGINT (RX bytes dropped 0; errors sent: error:2 x1; G-code motion blocks 0)"
+        in err
+    )
     assert not link.exists()
     assert not link.is_symlink()
 

@@ -309,6 +309,8 @@ class GrblFirmware:
             self.n_axes, coord_systems_mm=coords, g28_mm=g28, g30_mm=g30
         )
         self.rx = RxRing(firmware.facts.rx_buffer_bytes)
+        #: Motion blocks planned from G-code lines, not jogs (a garbled jog line becomes one).
+        self.gcode_blocks = 0
         self.reporter = StatusReporter()
         self.state = IDLE
         self.suspend = 0
@@ -1342,6 +1344,7 @@ class GrblFirmware:
         self.motion.plan_line(
             step.target_mm, step.feed_mm_min, rapid=step.rapid, feed_override=not step.jog
         )
+        self.gcode_blocks += not step.jog
         self._steps.popleft()
         if step.jog:
             if self.state == IDLE and not self.motion.planner_empty():

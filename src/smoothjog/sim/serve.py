@@ -7,6 +7,7 @@ virtual time is the event loop's clock minus the moment the driver started.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import os
 import signal
@@ -118,6 +119,8 @@ class SimServer:
         self.tcp_port: int | None = None
         self._clients: set[asyncio.StreamWriter] = set()
         self._symlink_made = False
+        #: `error:N` lines sent, by code, for the summary at the end.
+        self.errors_sent: collections.Counter[str] = collections.Counter()
 
     async def serve(self, stop: asyncio.Event) -> None:
         """Open the ports, run until stop is set, then close everything."""
@@ -138,6 +141,14 @@ class SimServer:
             with contextlib.suppress(asyncio.CancelledError):
                 await runner
             await self._close(loop)
+
+    def summary(self) -> str:
+        """What went wrong on the wire during the run, for the line printed at the end."""
+        errors = ", ".join(f"error:{code} x{n}" for code, n in sorted(self.errors_sent.items()))
+        return (
+            f"RX bytes dropped {self.firmware.rx.dropped}; errors sent: {errors or 'none'};"
+            f" G-code motion blocks {self.firmware.gcode_blocks}"
+        )
 
     def _ready_message(self) -> str:
         """One line saying where to connect."""
@@ -199,6 +210,8 @@ class SimServer:
     def _on_line(self, line: bytes) -> None:
         """A line from the controller: to the pty and to every TCP client."""
         data = line + b"\r\n"
+        if line.startswith(b"error:"):
+            self.errors_sent[line[6:].decode("ascii", "replace")] += 1
         if self._master_fd >= 0:
             with contextlib.suppress(BlockingIOError, OSError):
                 # Nobody reading a full pty loses output, as a serial line with no listener would.
@@ -249,5 +262,5 @@ async def serve_until_signal(opts: ServeOptions) -> int:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
     why = received[0] if received else "request"
-    print(f"smoothjog sim: stopped on {why}", file=sys.stderr, flush=True)
+    print(f"smoothjog sim: stopped on {why} ({server.summary()})", file=sys.stderr, flush=True)
     return 0
