@@ -718,3 +718,28 @@ def test_an_announcement_reaches_every_notice_listener_even_past_a_broken_one(ri
     rig.arbiter.add_notice_listener(heard.append)
     rig.arbiter.announce("whb04b: handwheel asleep")
     assert heard == ["whb04b: handwheel asleep"]
+
+
+# -- the link to the controller lost ----------------------------------------------------------
+
+
+def test_a_stick_held_across_a_lost_link_must_be_pressed_again(rig: Rig) -> None:
+    # The link went (CNCjs restarted) while the pad held a jog; when it is back, the same held
+    # stick, re-sent by its input, must not move the machine: release, then press.
+    _, pad = rig.attach("pad")
+    pad.submit(JOG)
+    rig.arbiter.machine_lost()
+    assert rig.sink.intents == [JOG, STOP]
+    assert not rig.arbiter.lease_armed
+    with pytest.raises(InputRefused, match="press again"):
+        pad.submit(JOG)
+    pad.submit(NEUTRAL)
+    pad.submit(JOG)
+    assert rig.sink.intents == [JOG, STOP, JOG]
+
+
+def test_a_lost_link_with_nothing_held_refuses_nothing_later(rig: Rig) -> None:
+    _, pad = rig.attach("pad")
+    rig.arbiter.machine_lost()
+    pad.submit(JOG)
+    assert rig.sink.intents == [STOP, JOG]

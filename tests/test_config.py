@@ -100,6 +100,19 @@ def test_every_known_firmware_is_accepted(firmware: str) -> None:
     assert parse_config(f"[sim]\nfirmware = {firmware!r}\n").sim.firmware == firmware
 
 
+def test_cncjs_connection(tmp_path: Path) -> None:
+    """A CNCjs server, its port and where its secret is."""
+    text = (
+        "[connection]\ncncjs = 'http://pi.local:8000'\ncncjs_port = '/dev/ttyACM0'\n"
+        "cncjs_config = '/home/pi/.cncrc'\ncncjs_user = 'alice'\n"
+    )
+    connection = load_config(write(tmp_path, text)).connection
+    assert connection.cncjs == "http://pi.local:8000"
+    assert connection.cncjs_port == "/dev/ttyACM0"
+    assert connection.cncjs_config == "/home/pi/.cncrc"
+    assert connection.cncjs_user == "alice"
+
+
 def test_tcp_connection(tmp_path: Path) -> None:
     """A connect URL is kept as written."""
     config = load_config(write(tmp_path, '[connection]\nconnect = "tcp://cnc.local:23"\n'))
@@ -166,6 +179,9 @@ def test_not_utf8(tmp_path: Path) -> None:
         ("[connection]\nport = ''\n", "port is empty"),
         ("[connection]\nport = 3\n", "port = 3 is not a string"),
         ("[connection]\nport = 'a'\nconnect = 'tcp://h:23'\n", "both set"),
+        ("[connection]\ncncjs = 'http://h:8000'\n", "cncjs needs cncjs_port"),
+        ("[connection]\ncncjs = 'h:8000'\ncncjs_port = 'p'\n", "cncjs is wrong: .*CNCjs address"),
+        ("[connection]\ncncjs = 'http://h'\ncncjs_port = 'p'\nport = 'a'\n", "beside port"),
         ("[connection]\nconnect = 'http://h:80'\n", r"connect is wrong: .*not a tcp:// address"),
         ("[connection]\nconnect = 'tcp://h:99999'\n", "port '99999'"),
         ("[jog]\nspeed_ratios = { x = 0 }\n", r"speed_ratios\.x = 0 must be above 0"),

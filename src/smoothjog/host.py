@@ -164,6 +164,7 @@ class Host:
         self._timer: asyncio.TimerHandle | None = None
         self._reading = False
         self._room: asyncio.Event | None = None
+        self._lost: asyncio.Event | None = None
         self._write_lock: asyncio.Lock | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._rehandshake_task: asyncio.Task[None] | None = None
@@ -179,6 +180,7 @@ class Host:
         """Start reading, run the connect handshake, then (jog=True) start driving the engine."""
         self._loop = asyncio.get_running_loop()
         self._room = asyncio.Event()
+        self._lost = asyncio.Event()
         self._write_lock = asyncio.Lock()
         self._reading = True
         if self.link.attach_relay(self._on_wire_line, self._on_jog_lock):
@@ -549,8 +551,15 @@ class Host:
             run(), name="smoothjog-rehandshake"
         )
 
+    async def wait_lost(self) -> None:
+        """Return once the link is lost or the host failed (link_error is then set)."""
+        assert self._lost is not None, "Host.start() has not run"
+        await self._lost.wait()
+
     def _ended(self) -> None:
         """The link is gone: wake everyone who waits so they see the error."""
+        if self._lost is not None:
+            self._lost.set()
         if self._port is not None:
             self._port.queue.put_nowait(None)
         if self._room is not None:

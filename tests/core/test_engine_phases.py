@@ -1352,3 +1352,63 @@ def test_a_speed_up_cancels_only_when_the_slow_queue_would_take_longer(
     choices = [c for _, c, _, _ in h.engine.stats.turn_choices]
     assert choices == [choice]
     assert h.engine.phase is (Phase.STOPPING if choice == "cancel" else Phase.JOGGING)
+
+
+def lock(reason: str | None) -> Step:
+    """Another program takes the machine (a CNCjs job starts) or gives it back."""
+
+    def step(h: EngineHarness) -> None:
+        h.model.jog_lock = reason
+
+    return step
+
+
+JOB = "CNCjs is running a job: jogging waits until it ends"
+LOCK_ROWS = [
+    row(
+        "a-lock-refuses-the-jog-in-words",
+        [
+            lock(JOB),
+            jog(),
+            poll,
+            check(lambda h: not h.jog_lines(), "no jog"),
+            phase_is(Phase.IDLE),
+        ],
+        Expect(Phase.IDLE),
+    ),
+    row(
+        "a-lock-while-jogging-stops-with-the-full-handshake-and-says-why",
+        [
+            *JOGGING,
+            lock(JOB),
+            sends(),
+            phase_is(Phase.STOPPING),
+            ok_all,
+            sends("0x85", "G4P0"),
+        ],
+        Expect(Phase.STOPPING, faults=("jogging stopped: " + JOB,)),
+    ),
+    row(
+        "the-lock-lifted-jogs-again",
+        [
+            lock(JOB),
+            jog(),
+            poll,
+            check(lambda h: not h.jog_lines(), "no jog"),
+            lock(None),
+            jog(),
+            check(lambda h: "$J" in kinds(h.poll()), "jogs"),
+        ],
+        Expect(Phase.JOGGING),
+    ),
+]
+
+
+@pytest.mark.parametrize(("harness", "script", "expect"), LOCK_ROWS)
+def test_jog_lock_of_another_program(
+    harness: dict[str, Any], script: list[Step], expect: Expect
+) -> None:
+    """A jog lock (models/machine.py jog_lock) refuses jogs and stops a running one."""
+    h = run_row(harness, script, expect)
+    if h.model.jog_lock is not None:
+        assert h.engine.can_jog() == (False, JOB)

@@ -116,3 +116,89 @@ def test_the_rx_size_can_be_set_after_the_handshake() -> None:
     assert ledger.capacity_bytes == 128
     ledger.capacity_bytes = 1024
     assert (ledger.capacity_bytes, ledger.free_bytes) == (1024, 1024)
+
+
+# --- a relayed ledger: lines of other clients placed by the relay's echo ------------------------
+
+CNCJS = foreign("cncjs-client")
+
+
+def _owners(ledger: Ledger) -> list[tuple[str, str]]:
+    return [(e.owner, e.text) for e in ledger.outstanding()]
+
+
+def test_a_relayed_line_is_on_the_wire_only_once_echoed() -> None:
+    ledger = Ledger(relayed=True)
+    entry = ledger.record_line(ENGINE, "$J=G91X1F100", 0.0)
+    assert not entry.on_wire
+    assert ledger.on_echo("$J=G91X1F100", CNCJS, 0.1) is entry
+    assert entry.on_wire
+    assert ledger.stats.lines[CNCJS] == 0
+
+
+def test_a_foreign_echo_goes_before_own_lines_not_yet_echoed() -> None:
+    # Own A echoed, own B sent but not echoed, then another client's $G is echoed: on the wire
+    # the order is A, $G, B, so the second reply is the other client's, not B's.
+    ledger = Ledger(relayed=True)
+    ledger.record_line(ENGINE, "A", 0.0)
+    ledger.on_echo("A", CNCJS, 0.0)
+    ledger.record_line(ENGINE, "B", 0.0)
+    foreign_entry = ledger.on_echo("$G", CNCJS, 0.0)
+    assert foreign_entry.owner == CNCJS
+    assert _owners(ledger) == [(ENGINE, "A"), (CNCJS, "$G"), (ENGINE, "B")]
+    assert ledger.in_flight_bytes == 2 + 3 + 2
+    ledger.on_echo("B", CNCJS, 0.0)
+    replies = [ledger.on_reply() for _ in range(3)]
+    assert [(e.owner, e.text) for e in replies if e is not None] == [
+        (ENGINE, "A"),
+        (CNCJS, "$G"),
+        (ENGINE, "B"),
+    ]
+    assert ledger.stats.replies_before_echo == 0
+
+
+def test_a_foreign_line_counts_even_past_the_buffer() -> None:
+    ledger = Ledger(20, relayed=True)
+    ledger.on_echo("x" * 30, CNCJS, 0.0)
+    assert ledger.free_bytes == 20 - 31
+    assert not ledger.fits("")
+
+
+def test_an_own_line_the_relay_never_echoed_is_dropped_when_a_later_one_is() -> None:
+    ledger = Ledger(relayed=True)
+    ledger.record_line(ENGINE, "A", 0.0)
+    ledger.record_line(ENGINE, "B", 0.0)
+    assert ledger.on_echo("B", CNCJS, 0.0).text == "B"
+    assert _owners(ledger) == [(ENGINE, "B")]
+    assert ledger.stats.unechoed_dropped == 1
+    assert ledger.in_flight_bytes == 2
+
+
+def test_a_plain_ledger_treats_every_echo_as_foreign_at_the_end() -> None:
+    ledger = Ledger()
+    ledger.record_line(ENGINE, "A", 0.0)
+    ledger.on_echo("A", CNCJS, 0.0)
+    assert _owners(ledger) == [(ENGINE, "A"), (CNCJS, "A")]
+
+
+def test_a_reply_before_the_echo_still_pops_and_is_counted() -> None:
+    ledger = Ledger(relayed=True)
+    ledger.record_line(ENGINE, "A", 0.0)
+    entry = ledger.on_reply()
+    assert entry is not None
+    assert entry.text == "A"
+    assert ledger.stats.replies_before_echo == 1
+    # The unechoed count followed: a new line and its echo match again.
+    ledger.record_line(ENGINE, "B", 0.0)
+    assert ledger.on_echo("B", CNCJS, 0.0).owner == ENGINE
+
+
+def test_reset_and_presumed_answers_keep_the_echo_count() -> None:
+    ledger = Ledger(relayed=True)
+    a = ledger.record_line(ENGINE, "A", 0.0)
+    ledger.record_line(ENGINE, "B", 0.0)
+    ledger.presume_answered([a])
+    assert ledger.on_echo("B", CNCJS, 0.0).owner == ENGINE
+    ledger.record_line(ENGINE, "C", 0.0)
+    ledger.reset()
+    assert ledger.on_echo("C", CNCJS, 0.0).owner == CNCJS  # C was lost with the reset

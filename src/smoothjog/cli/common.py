@@ -13,8 +13,8 @@ import argparse
 from dataclasses import replace
 
 from smoothjog.config import Config, ConnectionConfig, load_config
-from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.core.errors import LinkError
+from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.links.base import Link
 from smoothjog.links.cncjs import CncjsLink
 from smoothjog.links.cncjs_auth import make_token

@@ -38,11 +38,8 @@ from smoothjog.web.protocol import PendantError
 from smoothjog.web.server import is_loopback, run_pendant
 from smoothjog.web.session_backend import SessionBackend
 
-
 #: Seconds between attempts to open a lost link again.
 RECONNECT_S = 2.0
-#: How often the supervisor looks at the link (a lost link has already stopped the engine).
-WATCH_S = 0.25
 
 
 def register(subparsers: Any) -> None:
@@ -104,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"smoothjog: no controller given: using the built-in simulator ({firmware}, {machine})"
         )
-        make_link: Callable[[], Link] | None = None  # the simulator lives in this process
+        make_link: Callable[[], Link | None] | None = None  # the simulator lives in here
     else:
         make_link = lambda: link_for(connection)  # noqa: E731 - a new token, a new link
     return asyncio.run(_serve(link, config, args, connection.timeout_s, make_link))
@@ -145,8 +142,7 @@ async def _keep_connected(
     """Open the link again whenever it is lost, and hand the pendant the new session."""
     while True:
         session = backend.session
-        while session.link_error is None and session.error is None:
-            await asyncio.sleep(WATCH_S)
+        await session.wait_lost()
         why = session.link_error or session.error
         arbiter.machine_lost()
         print(f"smoothjog: {why}; connecting again every {RECONNECT_S:g} s", file=sys.stderr)
@@ -208,9 +204,7 @@ async def _serve(
         tasks = [server, waiter]
         if make_link is not None:
             tasks.append(
-                asyncio.create_task(
-                    _keep_connected(backend, arbiter, make_link, config, timeout_s)
-                )
+                asyncio.create_task(_keep_connected(backend, arbiter, make_link, config, timeout_s))
             )
         if args.input or config.devices:
             manager = DeviceManager(

@@ -166,7 +166,7 @@ class CncjsLink(Link):
         """Connect to CNCjs, join the port, and wait until CNCjs has seen the controller."""
         if self._sio is not None:
             return
-        import socketio  # noqa: PLC0415 - only a CNCjs user needs socket.io
+        import socketio  # type: ignore[import-untyped]  # noqa: PLC0415 - CNCjs users only
 
         loop = asyncio.get_running_loop()
         self._connected = loop.create_future()
@@ -196,11 +196,16 @@ class CncjsLink(Link):
             refused = await self._wait(self._connected, "accept the token")
             if refused is not None:
                 raise LinkError(refused)
-            ack = loop.create_future()
+            ack: asyncio.Future[tuple[object, ...]] = loop.create_future()
+
+            def on_ack(*args: object) -> None:
+                if not ack.done():
+                    ack.set_result(args)
+
             await sio.emit(
                 "open",
                 (self.port, {"baudrate": self.baud, "controllerType": "Grbl"}),
-                callback=lambda *args: ack.done() or ack.set_result(args),
+                callback=on_ack,
             )
             result = await self._wait(ack, f"open {self.port}")
             if result and result[0]:
@@ -272,9 +277,7 @@ class CncjsLink(Link):
             self._connected.set_result(refusal_sentence(data, self.url))
 
     def _on_disconnect(self) -> None:
-        self._lost(
-            f"the connection to CNCjs at {self.url} was lost (CNCjs stopped or restarted)"
-        )
+        self._lost(f"the connection to CNCjs at {self.url} was lost (CNCjs stopped or restarted)")
 
     def _on_read(self, data: object) -> None:
         if isinstance(data, str):

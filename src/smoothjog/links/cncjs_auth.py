@@ -117,7 +117,9 @@ def read_cncjs_config(path: str | os.PathLike[str] = DEFAULT_CNCJS_CONFIG) -> Cn
     except FileNotFoundError:
         raise CncjsAuthError(f"no CNCjs config at {where}: {fix}") from None
     except OSError as exc:
-        raise CncjsAuthError(f"cannot read the CNCjs config {where}: {exc.strerror}; {fix}") from None
+        raise CncjsAuthError(
+            f"cannot read the CNCjs config {where}: {exc.strerror}; {fix}"
+        ) from None
     try:
         data = json.loads(text)
     except ValueError as exc:
@@ -151,6 +153,7 @@ def make_token(
         return check_token(token.strip(), now_s)
     now = int(time.time() if now_s is None else now_s)
     env_secret = os.environ.get(SECRET_ENV)
+    users: tuple[CncjsUser, ...]
     if config_path is None and env_secret:
         secret, users, where = env_secret, (), f"${SECRET_ENV}"
     else:
