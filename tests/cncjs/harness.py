@@ -17,10 +17,7 @@ tests and its `async_wait_for` from async tests without stalling the loop under 
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
-import hashlib
-import hmac
 import json
 import os
 import re
@@ -40,6 +37,8 @@ from typing import Any, TypeVar
 
 import pytest
 import socketio
+
+from smoothjog.links.cncjs_auth import sign_token
 
 ROOT = Path(__file__).resolve().parents[2]
 CNCJS_DIR = ROOT / "tools" / "cncjs"
@@ -149,11 +148,6 @@ def stop_process(proc: subprocess.Popen[bytes], grace_s: float = STOP_GRACE_S) -
 # --- tokens -----------------------------------------------------------------------------------
 
 
-def _b64url(data: bytes) -> str:
-    """Base64url without padding, as JWT wants it."""
-    return base64.urlsafe_b64encode(data).rstrip(b"=").decode("ascii")
-
-
 def make_token(
     secret: str = TEST_SECRET,
     *,
@@ -167,19 +161,20 @@ def make_token(
     """An HS256 JWT with {"id", "name", "iat", "exp"}, as the CNCjs pendants send in ?token=.
 
     expired=True makes one that ran out an hour ago; wrong_secret=True signs it with another key.
+    Signed by smoothjog's own sign_token, which these tests thereby check against CNCjs.
     """
     issued = int(time.time()) if now is None else now
     if expired:
         issued -= 2 * 3600
         lifetime_s = 3600
-    header = {"alg": "HS256", "typ": "JWT"}
-    payload = {"id": user_id, "name": name, "iat": issued, "exp": issued + lifetime_s}
+    payload: dict[str, object] = {
+        "id": user_id,
+        "name": name,
+        "iat": issued,
+        "exp": issued + lifetime_s,
+    }
     key = secret + "-not-the-secret" if wrong_secret else secret
-    signing_input = ".".join(
-        _b64url(json.dumps(part, separators=(",", ":")).encode()) for part in (header, payload)
-    )
-    signature = hmac.new(key.encode(), signing_input.encode("ascii"), hashlib.sha256).digest()
-    return f"{signing_input}.{_b64url(signature)}"
+    return sign_token(key, payload)
 
 
 # --- the simulator ----------------------------------------------------------------------------

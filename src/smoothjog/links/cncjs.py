@@ -135,6 +135,7 @@ class CncjsLink(Link):
         self._error: LinkError | None = None
         self._partial = ""
         self._on_wire_line: Callable[[str, str], None] | None = None
+        self._early_echoes: list[tuple[str, str]] = []
         self._on_jog_lock: Callable[[str | None], None] | None = None
         #: The newest workflow state CNCjs reported ("idle", "running", "paused").
         self.workflow = "idle"
@@ -154,6 +155,11 @@ class CncjsLink(Link):
     ) -> bool:
         """Hand every echoed line and every change of CNCjs's workflow to the host."""
         self._on_wire_line, self._on_jog_lock = on_wire_line, on_jog_lock
+        # Lines echoed while opening (CNCjs's own `$$`) come first: their replies may still be
+        # on their way, queued in the inbox behind them.
+        early, self._early_echoes = self._early_echoes, []
+        for line, writer in early:
+            on_wire_line(line, writer)
         on_jog_lock(_WORKFLOW_LOCKS.get(self.workflow))
         return True
 
@@ -172,6 +178,7 @@ class CncjsLink(Link):
         self._connected = loop.create_future()
         self._settings_seen = asyncio.Event()
         self._inbox = LineInbox()
+        self._early_echoes = []
         self._error = None
         sio = socketio.AsyncClient(reconnection=False)
         self._register(sio)
@@ -215,9 +222,11 @@ class CncjsLink(Link):
                 )
             if self._error is not None:
                 raise self._error
-            # CNCjs reads `$$` once it has seen the controller: wait for that so its lines are
-            # not mistaken for answers to the handshake. A port CNCjs already had open replays
-            # its settings at once.
+            # CNCjs takes a freshly opened port as ready only after a banner or a status report
+            # (it asks with `?` 2 s later by itself): ask now. Then it reads `$$`: wait for that
+            # so its lines are not mistaken for answers to the handshake. A port CNCjs already
+            # had open replays its settings at once.
+            await sio.emit("write", (self.port, "?"))
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._settings_seen.wait(), self.timeout_s)
         except BaseException:
@@ -287,13 +296,14 @@ class CncjsLink(Link):
         if not isinstance(data, str):
             return
         lines, self._partial = wire_lines(data, self._partial)
-        if not lines or self._on_wire_line is None:
-            return
         writer = _DEFAULT_WRITER
         if isinstance(context, dict) and isinstance(context.get("source"), str):
             writer = f"{_DEFAULT_WRITER}-{context['source']}"
         for line in lines:
-            self._on_wire_line(line, writer)
+            if self._on_wire_line is None:
+                self._early_echoes.append((line, writer))
+            else:
+                self._on_wire_line(line, writer)
 
     def _on_open(self, data: object = None) -> None:
         if not isinstance(data, dict) or data.get("port") != self.port:
