@@ -70,6 +70,7 @@ async def _jog(host: Host, x: float, speed: float, hold_s: float) -> None:
 
 
 async def test_jog_and_stop_through_cncjs(cncjs: CncjsRig) -> None:
+    other = cncjs.client()  # the CNCjs web page, say: it must keep its port after smoothjog goes
     host = await _started(cncjs)
     try:
         start = host.model.mpos_mm
@@ -90,6 +91,11 @@ async def test_jog_and_stop_through_cncjs(cncjs: CncjsRig) -> None:
         assert host.ledger.stats.unowned_replies == 0
     finally:
         await host.close()
+    # smoothjog left without closing the port: the other client still talks to the machine.
+    before = len(other.reads)
+    other.write("G4P0\n")
+    other.wait_for(lambda: "ok" in other.reads[before:], 5.0, "the ok of G4P0")
+    assert not any(event == "serialport:close" for _t, event, _args in other.events)
     dropped, errors, gcode_blocks = _sim_summary(cncjs)
     assert (dropped, errors, gcode_blocks) == (0, "none", 0)
 
@@ -279,3 +285,15 @@ def test_the_pendant_connects_again_after_cncjs_restarts(cncjs: CncjsRig) -> Non
             proc.wait(5)
         if proc.stdout is not None:
             proc.stdout.close()
+
+
+async def test_another_client_closing_the_port_ends_the_link_in_words(cncjs: CncjsRig) -> None:
+    other = cncjs.client()
+    host = await _started(cncjs)
+    try:
+        await asyncio.to_thread(other.emit_with_ack, "close", cncjs.port_path)
+        async with asyncio.timeout(5.0):
+            await host.wait_lost()
+        assert "CNCjs closed" in str(host.link_error)
+    finally:
+        await host.close()
