@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import re
 import subprocess
 import sys
@@ -297,3 +298,32 @@ async def test_another_client_closing_the_port_ends_the_link_in_words(cncjs: Cnc
         assert "CNCjs closed" in str(host.link_error)
     finally:
         await host.close()
+
+
+async def test_with_users_configured_the_token_must_name_one(cncjs: CncjsRig) -> None:
+    # CNCjs watches its config: add a user, then the stock pendant token is refused, and a
+    # token for that user (signed from the same config) is accepted.
+    config = json.loads(cncjs.config_path.read_text())
+    config["users"] = [{"id": "u1", "name": "alice", "enabled": True, "password": "x"}]
+    cncjs.config_path.write_text(json.dumps(config))
+    with pytest.raises(LinkError, match=r"users configured .*\(alice\): give --cncjs-user"):
+        make_token(config_path=cncjs.config_path)
+    stock = cncjs.token()  # id "", name "cncjs-pendant": no such user now
+
+    async def refused() -> str:
+        link = _link(cncjs, stock)
+        try:
+            await link.open()
+        except LinkError as exc:
+            return str(exc)
+        finally:
+            await link.close()
+        return ""
+
+    async with asyncio.timeout(10.0):
+        while not (said := await refused()):  # noqa: ASYNC110 - until CNCjs reads the file
+            await asyncio.sleep(0.2)
+    assert "users configured, give --cncjs-user" in said
+    link = _link(cncjs, make_token(config_path=cncjs.config_path, user="alice"))
+    await link.open()
+    await link.close()
