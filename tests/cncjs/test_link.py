@@ -306,7 +306,10 @@ async def test_with_users_configured_the_token_must_name_one(cncjs: CncjsRig) ->
     config = json.loads(cncjs.config_path.read_text())
     config["users"] = [{"id": "u1", "name": "alice", "enabled": True, "password": "x"}]
     cncjs.config_path.write_text(json.dumps(config))
-    with pytest.raises(LinkError, match=r"users configured .*\(alice\): give --cncjs-user"):
+    with pytest.raises(
+        LinkError,
+        match=r"users configured .*\(alice\), so a token must name one: give --cncjs-user",
+    ):
         make_token(config_path=cncjs.config_path)
     stock = cncjs.token()  # id "", name "cncjs-pendant": no such user now
 
