@@ -330,3 +330,20 @@ async def test_with_users_configured_the_token_must_name_one(cncjs: CncjsRig) ->
     link = _link(cncjs, make_token(config_path=cncjs.config_path, user="alice"))
     await link.open()
     await link.close()
+
+
+async def test_a_move_by_another_client_is_seen_without_polling_fast(cncjs: CncjsRig) -> None:
+    # While idle smoothjog asks for status only every IDLE_POLL_S through CNCjs (CNCjs's console
+    # shows every `?`); when CNCjs's own reports say the machine moved, it asks at once.
+    other = cncjs.client()
+    host = await _started(cncjs)
+    try:
+        start = host.model.mpos_mm
+        assert start is not None
+        await asyncio.sleep(0.3)
+        asked = host.ledger.stats.realtime["engine"]
+        other.write("$J=G91 X-3 F3000\n")
+        await _until(lambda: (host.model.mpos_mm or start)[0] < start[0] - 2.9, 1.5)
+        assert host.ledger.stats.realtime["engine"] - asked < 10
+    finally:
+        await host.close()

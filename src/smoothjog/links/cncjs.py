@@ -49,6 +49,8 @@ CNCJS_POLL_BYTES = 3
 #: command, another pendant's jog line). An assumption: longer foreign lines written in that
 #: instant could still overrun the controller, which no pendant can prevent.
 FOREIGN_ALLOWANCE_BYTES = 32
+#: How seldom smoothjog asks for status through CNCjs while nothing moves (see idle_poll_s).
+IDLE_POLL_S = 2.0
 #: Writers as CNCjs names them in an echo's context (`source`).
 _DEFAULT_WRITER = "cncjs"
 #: A line CNCjs decorated with a description in brackets: the controller's own text is group 1.
@@ -137,6 +139,8 @@ class CncjsLink(Link):
         self._on_wire_line: Callable[[str, str], None] | None = None
         self._early_echoes: list[tuple[str, str]] = []
         self._on_jog_lock: Callable[[str | None], None] | None = None
+        self._on_moved: Callable[[], None] | None = None
+        self._last_state: object = None
         #: The newest workflow state CNCjs reported ("idle", "running", "paused").
         self.workflow = "idle"
         self._connected: asyncio.Future[str | None] | None = None
@@ -152,9 +156,12 @@ class CncjsLink(Link):
         self,
         on_wire_line: Callable[[str, str], None],
         on_jog_lock: Callable[[str | None], None],
+        on_moved: Callable[[], None],
     ) -> bool:
-        """Hand every echoed line and every change of CNCjs's workflow to the host."""
+        """Hand every echoed line, every change of CNCjs's workflow and of its view of the
+        controller to the host."""
         self._on_wire_line, self._on_jog_lock = on_wire_line, on_jog_lock
+        self._on_moved = on_moved
         # Lines echoed while opening (CNCjs's own `$$`) come first: their replies may still be
         # on their way, queued in the inbox behind them.
         early, self._early_echoes = self._early_echoes, []
@@ -162,6 +169,11 @@ class CncjsLink(Link):
             on_wire_line(line, writer)
         on_jog_lock(_WORKFLOW_LOCKS.get(self.workflow))
         return True
+
+    def idle_poll_s(self) -> float:
+        """CNCjs's console shows every client's `?`: while idle, ask seldom and rely on CNCjs's
+        own state reports (Grbl:state, sent when something changed) to ask at once."""
+        return IDLE_POLL_S
 
     def rx_reserve_bytes(self) -> int:
         """CNCjs's unseen `$G` poll and room for one line of another client in flight."""
@@ -276,6 +288,7 @@ class CncjsLink(Link):
         sio.on("serialport:error", self._on_error)
         sio.on("workflow:state", self._on_workflow)
         sio.on("Grbl:settings", self._on_settings)
+        sio.on("Grbl:state", self._on_state)
 
     def _on_connect(self) -> None:
         if self._connected is not None and not self._connected.done():
@@ -338,6 +351,18 @@ class CncjsLink(Link):
         self.workflow = state
         if self._on_jog_lock is not None:
             self._on_jog_lock(_WORKFLOW_LOCKS.get(state))
+
+    def _on_state(self, data: object = None) -> None:
+        # CNCjs sends its view of the controller (from its own 4 Hz `?`) when it changed; only
+        # the state and position matter here, not its modal-state echo of every `$G`.
+        status = data.get("status") if isinstance(data, dict) else None
+        if not isinstance(status, dict):
+            return
+        key = (status.get("activeState"), str(status.get("mpos")), str(status.get("wpos")))
+        if key != self._last_state:
+            self._last_state = key
+            if self._on_moved is not None:
+                self._on_moved()
 
     def _on_settings(self, data: object = None) -> None:
         settings = data.get("settings") if isinstance(data, dict) else None
