@@ -50,7 +50,7 @@ def register(subparsers: Any) -> None:
         description=__doc__,
     )
     add_connection_args(parser)
-    sim = parser.add_argument_group("built-in simulator (when no --port/--connect)")
+    sim = parser.add_argument_group("built-in simulator (when no --port/--connect/--cncjs)")
     sim.add_argument("--firmware", choices=FIRMWARE_NAMES)
     sim.add_argument(
         "--machine",
