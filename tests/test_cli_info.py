@@ -114,8 +114,10 @@ def _free_port() -> int:
             ["not a JSON Web Token"],
         ),
         (
-            ["--cncjs", "http://127.0.0.1:9", "--cncjs-port", "/dev/x"]
-            + ["--cncjs-config", "/nonexistent/.cncrc"],
+            [
+                *("--cncjs", "http://127.0.0.1:9", "--cncjs-port", "/dev/x"),
+                *("--cncjs-config", "/nonexistent/.cncrc"),
+            ],
             ["no CNCjs config at /nonexistent/.cncrc"],
         ),
         (["--config", "/nonexistent/smoothjog.toml", "--port", "/dev/ttyX"], ["does not exist"]),
