@@ -444,13 +444,18 @@ def _num(value: float, digits: int, unit: str = "") -> str:
     return "never" if math.isinf(value) else f"{value:.{digits}f}{unit}"
 
 
-def _spread(values: Sequence[float], digits: int, scale: float = 1.0, unit: str = "") -> str:
-    """Median and range, `9.37 mm (9.02-9.72)`; just the value for one run."""
+def _spread(
+    values: Sequence[float], digits: int, scale: float = 1.0, unit: str = "", note: str = ""
+) -> str:
+    """Median and range, `9.37 mm (9.02-9.72)`, with a note in the same brackets if given.
+
+    The range is left out when it shows as one number (a single run, or all runs alike).
+    """
     med = statistics.median(values) * scale
-    if len(values) == 1:
-        return _num(med, digits, unit)
-    lo, hi = min(values) * scale, max(values) * scale
-    return f"{_num(med, digits, unit)} ({_num(lo, digits)}-{_num(hi, digits)})"
+    lo, hi = _num(min(values) * scale, digits), _num(max(values) * scale, digits)
+    inside = [f"{lo}-{hi}"] if lo != hi else []
+    inside += [note] if note else []
+    return _num(med, digits, unit) + (f" ({'; '.join(inside)})" if inside else "")
 
 
 def cell(scenario: str, runs: Sequence[Measured], ph: sc.Physics) -> str:
@@ -461,11 +466,13 @@ def cell(scenario: str, runs: Sequence[Measured], ph: sc.Physics) -> str:
     def values(key: str) -> list[float]:
         return [m.metrics[key] for m in runs]
 
+    def median(key: str) -> float:
+        return statistics.median(values(key))
+
     if scenario in ("S1", "S4"):
-        dist = values("dist_mm")
-        ratio = statistics.median(dist) / ph.stop_mm
+        stop = f"{median('dist_mm') / ph.stop_mm:.2f}x v²/2a"
         text = (
-            f"{_spread(dist, 2, unit=' mm')} ({ratio:.2f}x v²/2a) /"
+            f"{_spread(values('dist_mm'), 2, unit=' mm', note=stop)} /"
             f" {_spread(values('time_s'), 3, unit=' s')}"
         )
     elif scenario == "S5":
@@ -480,14 +487,11 @@ def cell(scenario: str, runs: Sequence[Measured], ph: sc.Physics) -> str:
             f" (mean {_spread(values('mean_of_v'), 1, 100.0, ' %')} of v)"
         )
     else:
-        return f"{_spread(values('time_s'), 3, unit=' s')} ({_ratio_2v_a(values, ph)}x 2v/a)"
+        twice = f"{_num(median('time_s') / (2 * ph.stop_s), 2)}x 2v/a"
+        return _spread(values("time_s"), 3, unit=" s", note=twice)
     if scenario != "S4" and any(m.metrics["restarts"] for m in runs):
         text += f", restarts {'/'.join(str(int(m.metrics['restarts'])) for m in runs)}"
     return text
-
-
-def _ratio_2v_a(values: Callable[[str], list[float]], ph: sc.Physics) -> str:
-    return _num(statistics.median(values("time_s")) / (2 * ph.stop_s), 2)
 
 
 #: The table's rows: a label and which runs fill it (S4 through CNCjs: one row per death).

@@ -53,7 +53,8 @@ def test_ratios_pair_the_runs_of_one_phase() -> None:
     assert cncjs.ratios(results, "S4", cncjs.CNCJS_DIES) == pytest.approx([1.5, 1.5])
     rows = cncjs.table(results, ["S4"])
     assert len(rows) == 2 + 3  # both deaths through CNCjs get a row
-    assert "22.50 mm (15.00-30.00)" in rows[4]
+    assert "| 22.50 mm (15.00-30.00; 3.24x v²/2a) / 0.300 s |" in rows[4]
+    assert "| 15.50 mm (11.00-20.00; 2.23x v²/2a) / 0.200 s |" in rows[3]
 
 
 def _finite_numbers(row: str) -> list[float]:
