@@ -10,6 +10,9 @@ The pieces, each usable alone:
 * `RawClient`: "another CNCjs client" (python-socketio 4.x) that records what CNCjs sends it.
 * `CncjsRig`: all of it for one test, with kill() and restart() for CNCjs.
 
+The processes are started by bench/cncjs_rig.py, which `python -m bench cncjs` shares; here its
+errors (RigError) become test failures that show the process's log.
+
 RawClient runs its own event loop in a thread, so its blocking helpers can be used from plain
 tests and its `async_wait_for` from async tests without stalling the loop under test.
 """
@@ -18,46 +21,63 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
-import os
-import re
-import shutil
-import signal
-import socket
-import subprocess
-import sys
 import threading
 import time
-import urllib.error
-import urllib.request
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
 import socketio
+from bench import cncjs_rig
+from bench.cncjs_rig import (
+    BAUDRATE,
+    CNCJS_START_TIMEOUT_S,
+    CONTROLLER,
+    MACHINE,
+    README_TEST_COMMAND,
+    ROOT,
+    SIM_START_TIMEOUT_S,
+    STOP_GRACE_S,
+    TEST_SECRET,
+    RigError,
+    cncjs_config,
+    free_port,
+    log_tail,
+    stop_process,
+)
 
 from smoothjog.links.cncjs_auth import sign_token
 
-ROOT = Path(__file__).resolve().parents[2]
-CNCJS_DIR = ROOT / "tools" / "cncjs"
-CNCJS_BIN = CNCJS_DIR / "node_modules" / "cncjs" / "bin" / "cncjs"
-README_TEST_COMMAND = "./scripts/test"
+__all__ = [
+    "BAUDRATE",
+    "CNCJS_BIN",
+    "CNCJS_DIR",
+    "CONTROLLER",
+    "MACHINE",
+    "README_TEST_COMMAND",
+    "ROOT",
+    "TEST_SECRET",
+    "CncjsRefusedError",
+    "CncjsRig",
+    "CncjsServer",
+    "RawClient",
+    "SimProcess",
+    "cncjs_config",
+    "find_cncjs",
+    "find_node",
+    "free_port",
+    "log_tail",
+    "make_token",
+    "stop_process",
+]
 
-# A fixed secret (CNCjs keeps the one it finds in its config), so tests can sign tokens.
-TEST_SECRET = "$2a$10$smoothjogtestsecret0000"
+CNCJS_DIR = cncjs_rig.CNCJS_DIR
+#: Read by find_cncjs() at each call, so a test can point it elsewhere.
+CNCJS_BIN = cncjs_rig.CNCJS_BIN
 PENDANT_NAME = "cncjs-pendant"
-BAUDRATE = 115200
-CONTROLLER = "Grbl"
-MACHINE = "hobby-router"
-
-SIM_START_TIMEOUT_S = 15.0
-CNCJS_START_TIMEOUT_S = 30.0
-STOP_GRACE_S = 5.0
 CALL_TIMEOUT_S = 10.0
-LOG_TAIL_CHARS = 4000
-ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")  # CNCjs colours its log levels
 
 # Events a RawClient records (python-socketio 4.x has no catch-all handler).
 RECORDED_EVENTS = (
@@ -86,63 +106,25 @@ RECORDED_EVENTS = (
 T = TypeVar("T")
 
 
+@contextlib.contextmanager
+def _fails_the_test() -> Iterator[None]:
+    """A RigError (a process did not start) as a test failure with its log, no traceback."""
+    try:
+        yield
+    except RigError as exc:
+        pytest.fail(str(exc), pytrace=False)
+
+
 def find_cncjs() -> Path:
-    """The CNCjs program under tools/cncjs, or a test failure that says how to install it."""
-    if not CNCJS_BIN.is_file():
-        pytest.fail(
-            f"CNCjs is not installed ({CNCJS_BIN.relative_to(ROOT)} is missing): run the README's"
-            f" test command, {README_TEST_COMMAND}, whose set-up installs it with npm ci in"
-            " tools/cncjs",
-            pytrace=False,
-        )
-    return CNCJS_BIN
+    """The CNCjs program at CNCJS_BIN, or a test failure that says how to install it."""
+    with _fails_the_test():
+        return cncjs_rig.find_cncjs(CNCJS_BIN)
 
 
 def find_node() -> str:
     """The node program on PATH, or a test failure naming the packages."""
-    node = shutil.which("node")
-    if node is None:
-        pytest.fail(
-            "node is not on PATH: install nodejs and npm (apt-get install nodejs npm) and run"
-            f" {README_TEST_COMMAND}",
-            pytrace=False,
-        )
-    return node
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nobody listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-def log_tail(path: Path, chars: int = LOG_TAIL_CHARS) -> str:
-    """The end of a log file without its colour codes, for failure messages."""
-    try:
-        text = ANSI_COLOUR.sub("", path.read_text(errors="replace"))
-    except FileNotFoundError:
-        return "(no log)"
-    return text[-chars:] if text else "(empty log)"
-
-
-def _signal_group(proc: subprocess.Popen[bytes], sig: signal.Signals) -> None:
-    """Send sig to the process group the harness started proc in (it leads its own session)."""
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, sig)
-
-
-def stop_process(proc: subprocess.Popen[bytes], grace_s: float = STOP_GRACE_S) -> int:
-    """SIGTERM, wait up to grace_s, then SIGKILL; returns the exit code."""
-    if proc.poll() is None:
-        _signal_group(proc, signal.SIGTERM)
-        try:
-            proc.wait(grace_s)
-        except subprocess.TimeoutExpired:
-            _signal_group(proc, signal.SIGKILL)
-            proc.wait(grace_s)
-    return proc.returncode
+    with _fails_the_test():
+        return cncjs_rig.find_node()
 
 
 # --- tokens -----------------------------------------------------------------------------------
@@ -177,181 +159,30 @@ def make_token(
     return sign_token(key, payload)
 
 
-# --- the simulator ----------------------------------------------------------------------------
+# --- the processes ----------------------------------------------------------------------------
 
 
-class SimProcess:
-    """The smoothjog simulator on a pty, as its own process, with a stable symlink to it."""
-
-    def __init__(self, scratch: Path, machine: str = MACHINE) -> None:
-        """Prepare paths in scratch; start() runs it."""
-        self.scratch = scratch
-        self.machine = machine
-        self.link = scratch / "ttyGRBL"
-        self.log_path = scratch / "sim.log"
-        self.proc: subprocess.Popen[bytes] | None = None
-
-    def spawn(self) -> None:
-        """Start the process; wait_ready() waits for its pty."""
-        env = dict(os.environ)
-        src = str(ROOT / "src")
-        env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        argv = [sys.executable, "-m", "smoothjog", "sim", "--machine", self.machine]
-        argv += ["--link", str(self.link)]
-        with self.log_path.open("ab") as log:
-            self.proc = subprocess.Popen(
-                argv,
-                cwd=self.scratch,
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
+class SimProcess(cncjs_rig.SimProcess):
+    """The smoothjog simulator on a pty (bench/cncjs_rig.py); a failed start fails the test."""
 
     def wait_ready(self, timeout_s: float = SIM_START_TIMEOUT_S) -> None:
         """Wait until the --link symlink points at a live pty; fail with the sim's log if not."""
-        assert self.proc is not None, "spawn() first"
-        end = time.monotonic() + timeout_s
-        while not self.link.exists():  # exists() follows the link: the pty itself is there
-            if self.proc.poll() is not None:
-                pytest.fail(
-                    f"the simulator exited with {self.proc.returncode} before making"
-                    f" {self.link}:\n{log_tail(self.log_path)}",
-                    pytrace=False,
-                )
-            if time.monotonic() > end:
-                pytest.fail(
-                    f"the simulator made no {self.link} in {timeout_s:.0f} s:\n"
-                    f"{log_tail(self.log_path)}",
-                    pytrace=False,
-                )
-            time.sleep(0.02)
-
-    def start(self) -> None:
-        """Start and wait for the pty."""
-        self.spawn()
-        self.wait_ready()
-
-    def stop(self) -> None:
-        """SIGTERM (the sim removes its symlink), then SIGKILL if it lingers."""
-        if self.proc is not None:
-            stop_process(self.proc)
-            self.proc = None
+        with _fails_the_test():
+            super().wait_ready(timeout_s)
 
 
-# --- CNCjs ------------------------------------------------------------------------------------
-
-
-def cncjs_config(port_path: str, secret: str = TEST_SECRET) -> dict[str, Any]:
-    """A CNCjs config (~/.cncrc format) for one pty, loopback only, no users, a known secret."""
-    return {
-        "ports": [{"path": port_path, "manufacturer": "smoothjog sim"}],
-        "baudrates": [BAUDRATE],
-        "allowRemoteAccess": False,
-        "state": {"allowAnonymousUsageDataCollection": False, "checkForUpdates": False},
-        "commands": [],
-        "events": [],
-        "macros": [],
-        "users": [],
-        "secret": secret,
-    }
-
-
-class CncjsServer:
-    """One CNCjs process on 127.0.0.1, its config, HOME and log in a scratch dir."""
-
-    def __init__(self, scratch: Path, port_path: str, secret: str = TEST_SECRET) -> None:
-        """Write the config; start() runs CNCjs."""
-        self.scratch = scratch
-        self.port_path = port_path
-        self.secret = secret
-        self.home = scratch / "home"
-        self.home.mkdir(exist_ok=True)
-        self.config_path = scratch / "cncrc.json"
-        self.config_path.write_text(json.dumps(cncjs_config(port_path, secret), indent=2) + "\n")
-        self.log_path = scratch / "cncjs.log"
-        self.http_port = free_port()
-        self.url = f"http://127.0.0.1:{self.http_port}"
-        self.proc: subprocess.Popen[bytes] | None = None
-        self.starts = 0
+class CncjsServer(cncjs_rig.CncjsServer):
+    """One CNCjs process on 127.0.0.1 (bench/cncjs_rig.py); a failed start fails the test."""
 
     def spawn(self) -> None:
         """Start node on the same port as before; wait_ready() waits for HTTP."""
-        argv = [find_node(), str(find_cncjs()), "--host", "127.0.0.1"]
-        argv += ["--port", str(self.http_port), "--config", str(self.config_path), "-vv"]
-        env = dict(os.environ, HOME=str(self.home))
-        self.starts += 1
-        with self.log_path.open("ab") as log:
-            log.write(f"=== harness: CNCjs start #{self.starts}: {' '.join(argv)}\n".encode())
-            log.flush()
-            self.proc = subprocess.Popen(
-                argv,
-                cwd=self.scratch,
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
-
-    def _answers(self) -> bool:
-        """Whether GET / answers now (no proxy: loopback only)."""
-        opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
-        try:
-            with opener.open(self.url + "/", timeout=1.0) as reply:
-                return bool(200 <= reply.status < 500)
-        except urllib.error.HTTPError as exc:
-            return exc.code < 500
-        except (urllib.error.URLError, OSError):
-            return False
+        with _fails_the_test():
+            super().spawn()
 
     def wait_ready(self, timeout_s: float = CNCJS_START_TIMEOUT_S) -> None:
         """Wait until http://127.0.0.1:<port>/ answers; fail with CNCjs's output if not."""
-        assert self.proc is not None, "spawn() first"
-        end = time.monotonic() + timeout_s
-        while not self._answers():
-            if self.proc.poll() is not None:
-                pytest.fail(
-                    f"CNCjs exited with {self.proc.returncode} before answering on {self.url}"
-                    f" (log {self.log_path}):\n{log_tail(self.log_path)}",
-                    pytrace=False,
-                )
-            if time.monotonic() > end:
-                pytest.fail(
-                    f"CNCjs did not answer on {self.url} within {timeout_s:.0f} s"
-                    f" (log {self.log_path}):\n{log_tail(self.log_path)}",
-                    pytrace=False,
-                )
-            time.sleep(0.05)
-
-    def start(self) -> None:
-        """Start and wait until it answers."""
-        self.spawn()
-        self.wait_ready()
-
-    @property
-    def running(self) -> bool:
-        """Whether the CNCjs process is alive."""
-        return self.proc is not None and self.proc.poll() is None
-
-    def stop(self) -> None:
-        """SIGTERM, then SIGKILL if it lingers."""
-        if self.proc is not None:
-            stop_process(self.proc)
-            self.proc = None
-
-    def kill(self) -> None:
-        """SIGKILL at once, as when CNCjs dies mid-jog; the pty and the sim stay."""
-        if self.proc is not None:
-            _signal_group(self.proc, signal.SIGKILL)
-            self.proc.wait(STOP_GRACE_S)
-            self.proc = None
-
-    def restart(self) -> None:
-        """Stop (if running) and start again on the same port with the same config."""
-        self.stop()
-        self.start()
+        with _fails_the_test():
+            super().wait_ready(timeout_s)
 
 
 # --- a raw CNCjs client -----------------------------------------------------------------------
@@ -705,10 +536,7 @@ class CncjsRig:
         rig = cls(scratch, sim, server)
         try:
             find_cncjs()
-            sim.spawn()
-            server.spawn()
-            sim.wait_ready()
-            server.wait_ready()
+            cncjs_rig.start_side_by_side(sim, server)
         except BaseException:
             rig.close()
             raise
