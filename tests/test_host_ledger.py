@@ -208,3 +208,92 @@ def test_a_second_writer_during_a_held_jog_changes_nothing_for_either() -> None:
         assert share > 0.98
         assert dips == 0
         assert engine.stats.stops[-1].tracked_error_steps <= 1.0
+
+
+def test_query_output_is_routed_to_the_owner_that_asked() -> None:
+    """[GC:] of another owner's `$G` reaches the routed listeners as that owner's, not all's."""
+
+    async def body(host: Host, link: SimLink) -> None:
+        other = foreign("sender")
+        routed: list[tuple[str, str | None]] = []
+
+        def watch(raw: bytes, resp: object, route: Entry | None) -> None:
+            if not isinstance(resp, StatusReport):
+                routed.append((raw.decode(), None if route is None else route.owner))
+
+        host.add_routed_listener(watch)
+        host.add_reply_handler(other, lambda entry, resp, now_s: None)
+        await host.write_line(other, "$G")
+        lines, reply = await host.console("$#")  # the console asks while $G is answered
+        await asyncio.sleep(0.1)
+        assert reply == Ok()
+        assert not [x for x in lines if x.startswith("[GC:")]  # not the console's own
+        assert lines[0].startswith("[G54:")
+        gc = [owner for text, owner in routed if text.startswith("[GC:")]
+        assert gc == [other]
+        params = {owner for text, owner in routed if text.startswith("[G5")}
+        assert params == {CONSOLE}
+        assert [owner for text, owner in routed if text == "ok"] == [other, CONSOLE]
+
+    run_virtual(body)
+
+
+def test_output_with_no_line_waiting_is_nobody_s_and_a_banner_is_everyone_s() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        routed: list[tuple[str, str | None]] = []
+        everything: list[object] = []
+        host.add_routed_listener(
+            lambda raw, resp, route: routed.append(
+                (raw.decode(), None if route is None else route.owner)
+            )
+        )
+        host.add_line_listener(lambda resp, now_s: everything.append(resp))
+        host._on_line(b"[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]", host.now_s())
+        assert routed == []  # nobody asked for it
+        assert len(everything) == 1  # the plain listeners still see every line
+        host.send_realtime(CONSOLE, b"\x18")
+        assert host.reset_pending
+        await asyncio.sleep(0.6)
+        assert not host.reset_pending
+        banners = [(text, owner) for text, owner in routed if text.startswith("Grbl")]
+        assert banners == [("Grbl 1.1h ['$' for help]", None)]
+
+    run_virtual(body)
+
+
+def test_startup_lines_after_a_reset_go_to_everyone() -> None:
+    """`>G54:ok` runs at the restart, before any line is read: nobody's query, though the
+    re-handshake's first line may already wait."""
+
+    async def body(host: Host, link: SimLink) -> None:
+        routed: list[tuple[str, str | None]] = []
+        host.add_routed_listener(
+            lambda raw, resp, route: routed.append(
+                (raw.decode(), None if route is None else route.owner)
+            )
+        )
+        await host.write_line(CONSOLE, "G4P1")
+        host._on_line(b"Grbl 1.1h ['$' for help]", host.now_s())
+        await host.write_line(HANDSHAKE, "$I")
+        host._on_line(b">G54:ok", host.now_s())
+        assert (">G54:ok", None) in routed
+        host._on_line(b"ok", host.now_s())
+        await host.write_line(CONSOLE, "$H")
+        host._on_line(b">G54:ok", host.now_s())  # after `$H`: that line's
+        assert routed[-1] == (">G54:ok", CONSOLE)
+
+    run_virtual(body)
+
+
+def test_jog_locks_of_several_sources_combine() -> None:
+    async def body(host: Host, link: SimLink) -> None:
+        assert host.model.jog_lock is None
+        host.set_jog_lock("relay", "a CNCjs job")
+        host.set_jog_lock("sender", "the sender's job")
+        assert host.model.jog_lock == "a CNCjs job"
+        host.set_jog_lock("relay", None)
+        assert host.model.jog_lock == "the sender's job"
+        host.set_jog_lock("sender", None)
+        assert host.model.jog_lock is None
+
+    run_virtual(body)

@@ -14,7 +14,9 @@ SRC = Path(__file__).resolve().parent.parent / "src" / "smoothjog"
 ALLOWED: dict[str, set[str]] = {
     "core": set(),
     "vclock": {"core"},
-    "sim": {"core"},
+    # The one raw-pty opener (a leaf, beside core): the simulator's pty and the proxy's.
+    "pty_port": {"core"},
+    "sim": {"core", "pty_port"},
     "links": {"core", "sim"},  # links/sim.py wraps the simulator in the Link contract
     "inputs": {"core"},
     "handshake": {"core"},
@@ -26,6 +28,8 @@ ALLOWED: dict[str, set[str]] = {
     # The session's input devices: found (inputs), run under the arbiter, commands by control.
     "devices": {"core", "links", "inputs", "host", "arbiter", "control", "config", "handshake"},
     "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs", "control"},
+    # The sender's side of `smoothjog proxy`: its pty and TCP port, lines forwarded by the host.
+    "proxy": {"core", "links", "host", "pty_port"},
     "cli": {
         "core",
         "sim",
@@ -40,6 +44,8 @@ ALLOWED: dict[str, set[str]] = {
         "control",
         "devices",
         "web",
+        "proxy",
+        "pty_port",
     },
 }
 

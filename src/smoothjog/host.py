@@ -6,7 +6,8 @@ on the event loop:
 
 - the reader: every received line is parsed once, folded into the machine model once, and then
   routed: an `ok`/`error` goes to the owner of the oldest unanswered line (the ledger decides),
-  everything else (status reports, `ALARM`, `[MSG:]`, banners, query output) goes to everyone.
+  and so does the output of a query (`[GC:...]`, `$N=...`, `[VER:]`, ...), which Grbl prints
+  just before that line's `ok`; status reports, `ALARM`, `[MSG:]` and banners go to everyone.
   It runs inside the link's read callback (a task only for a link that cannot call back);
 - the ticker: polls the jog engine when something it can see happened (a line arrived, a new
   intent, its own deadline) and writes what it returns. It is a plain callback scheduled with
@@ -41,13 +42,22 @@ from smoothjog.core.jogger import (
 )
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL
+from smoothjog.core.realtime import JOG_CANCEL, RESET
 from smoothjog.core.responses import (
     Banner,
+    BuildOptions,
     ErrorReply,
+    Feedback,
+    GcodeModes,
+    HelpReply,
+    NamedSetting,
     Ok,
+    Parameter,
     Response,
+    SettingLine,
+    StartupLineResult,
     StatusReport,
+    VersionInfo,
     parse_response,
 )
 from smoothjog.handshake import handshake
@@ -90,8 +100,34 @@ class JogEngine(Protocol):
 #: Builds the engine once the handshake has filled the model.
 EngineFactory = Callable[[MachineModel, Ledger], JogEngine]
 
-#: Called with every received line after it was routed: (response, raw line, time).
+#: Called with every received line after it was routed: (response, time).
 LineListener = Callable[[Response, float], None]
+
+#: Called with every received line and where it was routed: (raw line, response, entry). For a
+#: reply the entry is the line it answers (None: no line waited for it); for query output the
+#: line whose query printed it; None for a line that goes to everyone. (Query output that came
+#: with no line waiting is nobody's and is not given to these listeners.)
+RoutedListener = Callable[[bytes, Response, Entry | None], None]
+
+#: What a query prints before its `ok`: it belongs to the owner of the oldest unanswered line
+#: (`$G`, `$#` and `[PRB:]`, `$$`, `$N`, `$I`, `$`, `[echo:]`, `$H`'s startup lines).
+OWNED_OUTPUT = (
+    GcodeModes,
+    Parameter,
+    SettingLine,
+    NamedSetting,
+    VersionInfo,
+    BuildOptions,
+    Feedback,
+    HelpReply,
+    StartupLineResult,
+)
+
+#: The jog-lock source of a relay's reports (a CNCjs job), see Host.set_jog_lock.
+RELAY_LOCK = "relay"
+
+#: Longest a Ctrl-X counts as pending without the banner that ends it (Host.reset_pending).
+RESET_PENDING_S = 2.0
 
 
 class _QueryPort:
@@ -173,7 +209,13 @@ class Host:
         self._rehandshake_task: asyncio.Task[None] | None = None
         self._port: _QueryPort | None = None
         self._listeners: list[LineListener] = []
-        self._raw_listeners: list[Callable[[bytes, Response], None]] = []
+        self._routed_listeners: list[RoutedListener] = []
+        #: A banner came and no reply yet: startup lines run now, on nobody's query.
+        self._after_banner = False
+        #: Why jogging waits, by who said so; model.jog_lock shows the first.
+        self._jog_locks: dict[str, str] = {}
+        #: When somebody sent Ctrl-X, until the banner says the controller restarted.
+        self._reset_sent_s: float | None = None
         self._reply_handlers: dict[str, Callable[[Entry, Ok | ErrorReply, float], None]] = {
             CONSOLE: _resolve_console_reply,
         }
@@ -297,29 +339,30 @@ class Host:
         """Send a realtime byte for owner, ahead of any line the link still holds."""
         self.ledger.record_realtime(owner, byte)
         self.link.send_realtime(byte)
+        if byte == RESET and self._loop is not None:
+            self._reset_sent_s = self._loop.time()
+
+    @property
+    def reset_pending(self) -> bool:
+        """True from a Ctrl-X until the banner (at most RESET_PENDING_S): a line written now
+        would reach the controller while it restarts, and run after it (no reply is owed to
+        the ledger's lines meanwhile: the banner forgets them)."""
+        sent_s = self._reset_sent_s
+        if sent_s is None or self._loop is None:
+            return False
+        if self._loop.time() - sent_s > RESET_PENDING_S:
+            self._reset_sent_s = None  # no banner came: the controller did not restart
+            return False
+        return True
 
     async def query(self, text: str, *, timeout_s: float = 5.0) -> list[Response]:
-        """Send a console line; return what the controller printed up to and with its reply."""
-        loop = self._running_loop()
-        done: asyncio.Future[Ok | ErrorReply] = loop.create_future()
-        seen: list[Response] = []
+        """Send a console line; return what the controller printed up to and with its reply.
 
-        def collect(resp: Response, now_s: float) -> None:
-            if not isinstance(resp, Ok | ErrorReply):
-                seen.append(resp)
-
-        self._listeners.append(collect)
-        try:
-            await self.write_line(CONSOLE, text, tag=done)
-            async with asyncio.timeout(timeout_s):
-                reply = await done
-        except TimeoutError:
-            raise ConnectError(
-                f"{self.link.describe()} did not answer {text!r} within {timeout_s} s"
-            ) from None
-        finally:
-            self._listeners.remove(collect)
-        return [*seen, reply]
+        That is the line's own output and what went to everyone meanwhile (status reports,
+        `[MSG:]`), never another owner's query output.
+        """
+        printed, reply = await self._ask(text, timeout_s)
+        return [*(resp for _raw, resp in printed), reply]
 
     async def console(
         self, text: str, *, timeout_s: float = 5.0
@@ -329,20 +372,41 @@ class Host:
         Status reports and the reply itself are left out of the lines; they are what `query`
         returns parsed.
         """
-        printed: list[str] = []
+        printed, reply = await self._ask(text, timeout_s)
+        lines = [
+            raw.decode("ascii", "replace").rstrip("\r\n")
+            for raw, resp in printed
+            if not isinstance(resp, StatusReport)
+        ]
+        return lines, reply
 
-        def keep(raw: bytes, resp: Response) -> None:
-            if not isinstance(resp, Ok | ErrorReply | StatusReport):
-                printed.append(raw.decode("ascii", "replace").rstrip("\r\n"))
+    async def _ask(
+        self, text: str, timeout_s: float
+    ) -> tuple[list[tuple[bytes, Response]], Ok | ErrorReply]:
+        """Send a console line; (what it printed or everyone got, in order; its reply)."""
+        loop = self._running_loop()
+        done: asyncio.Future[Ok | ErrorReply] = loop.create_future()
+        seen: list[tuple[bytes, Response]] = []
 
-        self._raw_listeners.append(keep)
+        def collect(raw: bytes, resp: Response, route: Entry | None) -> None:
+            if done.done() or isinstance(resp, Ok | ErrorReply):
+                return
+            if route is not None and route.tag is not done:
+                return  # another owner's query printed it
+            seen.append((raw, resp))
+
+        self._routed_listeners.append(collect)
         try:
-            responses = await self.query(text, timeout_s=timeout_s)
+            await self.write_line(CONSOLE, text, tag=done)
+            async with asyncio.timeout(timeout_s):
+                reply = await done
+        except TimeoutError:
+            raise ConnectError(
+                f"{self.link.describe()} did not answer {text!r} within {timeout_s} s"
+            ) from None
         finally:
-            self._raw_listeners.remove(keep)
-        reply = responses[-1]
-        assert isinstance(reply, Ok | ErrorReply)
-        return printed, reply
+            self._routed_listeners.remove(collect)
+        return seen, reply
 
     async def reread_settings(self, *, timeout_s: float = 5.0) -> None:
         """Read `$$` again and give the engine the limits it now implies (only while idle)."""
@@ -366,6 +430,34 @@ class Host:
     def add_line_listener(self, listener: LineListener) -> None:
         """Call listener(response, now_s) after every received line."""
         self._listeners.append(listener)
+
+    def add_routed_listener(self, listener: RoutedListener) -> None:
+        """Call listener(raw, response, entry) for every received line, with its route.
+
+        entry is the ledger line the line belongs to: for an `ok`/`error` the line it answers,
+        for query output the line whose query printed it (its owner asked for it); None for a
+        line that goes to everyone (status reports, ALARM, [MSG:], banners, anything unparsed).
+        Query output that came with no line waiting (the ledger lost its place) is nobody's
+        and is not given. A forwarder gives each owner what is its own and everyone's.
+        """
+        self._routed_listeners.append(listener)
+
+    def set_jog_lock(self, source: str, reason: str | None) -> None:
+        """Say why jogging must wait (reason in words), or that it may go on (None), for source.
+
+        Several sources may hold the machine at once (a relay's CNCjs job, a proxied sender's
+        job); `model.jog_lock` shows the oldest reason still standing, and the engine refuses
+        jogs with it and stops a running jog with its full handshake.
+        """
+        if reason is None:
+            self._jog_locks.pop(source, None)
+        else:
+            self._jog_locks[source] = reason
+        combined = next(iter(self._jog_locks.values()), None)
+        if combined != self.model.jog_lock:
+            logger.info("jogging %s", f"waits: {combined}" if combined else "may go on again")
+        self.model.jog_lock = combined
+        self._poke()
 
     def add_listener(self, callback: Callable[[], None]) -> None:
         """Call callback (no arguments) after every received line: the pendant's change signal."""
@@ -463,10 +555,7 @@ class Host:
 
     def _on_jog_lock(self, reason: str | None) -> None:
         """Another program took or gave back the machine (a CNCjs job began or ended)."""
-        if reason != self.model.jog_lock:
-            logger.info("jogging %s", f"waits: {reason}" if reason else "may go on again")
-        self.model.jog_lock = reason
-        self._poke()
+        self.set_jog_lock(RELAY_LOCK, reason)
 
     def _on_link_end(self, error: LinkError) -> None:
         """The link is gone (or was closed under the host)."""
@@ -494,8 +583,11 @@ class Host:
         poke = True
         port = self._port
         driver = self.driver
+        route: Entry | None = None
+        orphan = False
         if isinstance(resp, Ok | ErrorReply):
-            entry = self.ledger.on_reply()
+            entry = route = self.ledger.on_reply()
+            self._after_banner = False
             assert self._room is not None
             self._room.set()
             if entry is None:
@@ -514,7 +606,17 @@ class Host:
                 if handler is not None:
                     handler(entry, resp, now_s)
         else:
+            if isinstance(resp, OWNED_OUTPUT) and not (
+                # Startup lines run at a reset, before any line is read: nobody's query.
+                self._after_banner and isinstance(resp, StartupLineResult)
+            ):
+                route = self.ledger.oldest()
+                # With no line waiting the output is nobody's (a reply that came twice, say):
+                # the routed listeners, which hand out what is each owner's, do not get it.
+                orphan = route is None
             if isinstance(resp, Banner):
+                self._after_banner = True
+                self._reset_sent_s = None
                 dropped = self.ledger.reset()
                 if dropped:
                     logger.info("the controller reset with %d lines unanswered", len(dropped))
@@ -529,12 +631,15 @@ class Host:
                 for output in driver.reset_outputs():
                     if isinstance(output, SendRealtime):
                         self.send_realtime(ENGINE, output.byte)
-            if port is not None:
-                port.queue.put_nowait(raw)
+            if port is not None and (route is None or route.owner == HANDSHAKE):
+                port.queue.put_nowait(raw)  # not another owner's query output
             if isinstance(resp, Banner) and driver is not None and port is None:
                 self._start_rehandshake()
-        for raw_listener in list(self._raw_listeners):
-            raw_listener(raw, resp)
+        for routed in list(self._routed_listeners) if not orphan else ():
+            try:
+                routed(raw, resp, route)
+            except Exception:  # a listener's bug must not stop the machine's driver
+                logger.exception("a routed line listener failed")
         for listener in list(self._listeners):
             try:
                 listener(resp, now_s)

@@ -1389,6 +1389,26 @@ LOCK_ROWS = [
         Expect(Phase.STOPPING, faults=("jogging stopped: " + JOB,)),
     ),
     row(
+        "a-stick-held-through-the-lock-needs-a-new-press",
+        [
+            *JOGGING,
+            lock(JOB),
+            sends(),
+            ok_all,
+            sends("0x85", "G4P0"),
+            ok,
+            sends("?"),
+            report("Idle"),
+            lock(None),
+            jog(),  # the same stick, still held: no new press
+            check(lambda h: "$J" not in kinds(h.poll()), "no restart"),
+            NEUTRAL,
+            jog(),  # released and pressed again
+            check(lambda h: "$J" in kinds(h.poll()), "jogs"),
+        ],
+        Expect(Phase.JOGGING, faults=("jogging stopped: " + JOB,), stops=((True, 0),)),
+    ),
+    row(
         "the-lock-lifted-jogs-again",
         [
             lock(JOB),

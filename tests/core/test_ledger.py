@@ -85,6 +85,29 @@ def test_outstanding_and_waiting_by_owner() -> None:
     assert ledger.waiting(CONSOLE) == 0
 
 
+def test_query_output_belongs_to_the_oldest_line() -> None:
+    """Grbl prints a query's lines just before its ok: the oldest line's owner asked for them."""
+    ledger = Ledger()
+    assert ledger.oldest() is None
+    first = ledger.record_line(foreign("sender"), "$G", 0.0)
+    ledger.record_line(ENGINE, "$J=G91X1F100", 0.0)
+    assert ledger.oldest() is first
+    ledger.on_reply()
+    oldest = ledger.oldest()
+    assert oldest is not None
+    assert oldest.owner == ENGINE
+
+
+def test_a_relayed_line_not_on_the_wire_owns_no_output() -> None:
+    ledger = Ledger(relayed=True)
+    ledger.record_line(ENGINE, "$G", 0.0)
+    assert ledger.oldest() is None  # not echoed: it may not have reached the controller
+    ledger.on_echo("$G", foreign("cncjs"), 0.0)
+    oldest = ledger.oldest()
+    assert oldest is not None
+    assert oldest.owner == ENGINE
+
+
 def test_a_reset_drops_everything_and_says_what() -> None:
     """A controller reset empties its RX buffer: nothing is owed an answer any more."""
     ledger = Ledger()

@@ -16,7 +16,7 @@ from smoothjog import __version__
 from smoothjog.core.errors import SmoothjogError
 
 #: Subcommand modules, in the order `--help` lists them.
-SUBCOMMANDS: tuple[str, ...] = ("pendant", "info", "devices", "sim", "jog")
+SUBCOMMANDS: tuple[str, ...] = ("pendant", "proxy", "info", "devices", "sim", "jog")
 
 #: The subcommand that runs when none is given (the README's main job).
 DEFAULT_COMMAND: str | None = "pendant"

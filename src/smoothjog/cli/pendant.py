@@ -4,6 +4,10 @@ Without --port, --connect or --cncjs it drives the built-in simulated Grbl machi
 so the pendant can be tried with no machine at all. When the link to a controller is lost (a
 CNCjs restart, a cable pulled) the pendant stays up, says so, and connects again every
 RECONNECT_S. Ctrl-C stops any jog with the full cancel handshake and shuts down cleanly.
+
+The session itself (the link, the host, the pendant, the devices, the reconnect) is shared:
+`add_session_args`, `prepare_session` and `run_session` serve `smoothjog proxy` as well, which
+adds its sender ports beside them through `SessionHooks` and a side task.
 """
 
 from __future__ import annotations
@@ -13,8 +17,9 @@ import asyncio
 import contextlib
 import signal
 import sys
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 from smoothjog.arbiter import Arbiter
 from smoothjog.cli.common import (
@@ -42,6 +47,27 @@ from smoothjog.web.session_backend import SessionBackend
 RECONNECT_S = 2.0
 
 
+class SessionHooks(Protocol):
+    """Something that rides along with every session's host (the proxy's forwarder)."""
+
+    def attach(self, host: Host) -> None:
+        """A host was made; called before its start()."""
+
+    def started(self, host: Host) -> None:
+        """That host finished its handshake."""
+
+
+@dataclass
+class PreparedSession:
+    """What a session command was asked for, checked before the machine is touched."""
+
+    config: Config
+    link: Link
+    timeout_s: float
+    #: A new link to the same controller (None: the built-in simulator, never lost).
+    make_link: Callable[[], Link | None] | None
+
+
 def register(subparsers: Any) -> None:
     """Add `pendant` to the command line."""
     parser = subparsers.add_parser(
@@ -49,6 +75,12 @@ def register(subparsers: Any) -> None:
         help="the web pendant on the built-in simulator or a real controller (default command)",
         description=__doc__,
     )
+    add_session_args(parser)
+    parser.set_defaults(func=run)
+
+
+def add_session_args(parser: argparse.ArgumentParser) -> None:
+    """The controller, built-in simulator, pendant and device options of a session command."""
     add_connection_args(parser)
     sim = parser.add_argument_group("built-in simulator (when no --port/--connect/--cncjs)")
     sim.add_argument("--firmware", choices=FIRMWARE_NAMES)
@@ -77,11 +109,15 @@ def register(subparsers: Any) -> None:
         "part of its name, or auto (every device but keyboards); repeatable; "
         "`smoothjog devices` lists them",
     )
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run until Ctrl-C or SIGTERM."""
+    return asyncio.run(run_session(prepare_session(args), args))
+
+
+def prepare_session(args: argparse.Namespace) -> PreparedSession:
+    """Read the config and check the options; pick the link (the simulator when none named)."""
     config = config_from_args(args)
     host = args.host or config.pendant.host
     if not (args.lan or config.pendant.lan) and not is_loopback(host):
@@ -104,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         make_link: Callable[[], Link | None] | None = None  # the simulator lives in here
     else:
         make_link = lambda: link_for(connection)  # noqa: E731 - a new token, a new link
-    return asyncio.run(_serve(link, config, args, connection.timeout_s, make_link))
+    return PreparedSession(config, link, connection.timeout_s, make_link)
 
 
 def _print_notice(text: str, arbiter: Arbiter) -> None:
@@ -138,6 +174,7 @@ async def _keep_connected(
     make_link: Callable[[], Link | None],
     config: Config,
     timeout_s: float,
+    hooks: SessionHooks | None,
 ) -> None:
     """Open the link again whenever it is lost, and hand the pendant the new session."""
     while True:
@@ -156,6 +193,8 @@ async def _keep_connected(
             try:
                 await link.open()
                 fresh = _make_host(link, config, timeout_s)
+                if hooks is not None:
+                    hooks.attach(fresh)
                 await fresh.start()
             except (SmoothjogError, OSError) as exc:
                 with contextlib.suppress(SmoothjogError, OSError):
@@ -165,18 +204,27 @@ async def _keep_connected(
                     last = str(exc)
                 continue
             backend.attach(fresh)
+            if hooks is not None:
+                hooks.started(fresh)
             print(f"smoothjog: connected again to {link.describe()}", file=sys.stderr, flush=True)
             arbiter.announce(f"connected again to {link.describe()}")
             break
 
 
-async def _serve(
-    link: Link,
-    config: Config,
+async def run_session(
+    prepared: PreparedSession,
     args: argparse.Namespace,
-    timeout_s: float,
-    make_link: Callable[[], Link | None] | None = None,
+    *,
+    hooks: SessionHooks | None = None,
+    side: Callable[[], Coroutine[Any, Any, None]] | None = None,
 ) -> int:
+    """The session until Ctrl-C or SIGTERM: host, pendant, devices, reconnect.
+
+    hooks see every host (the first and each one after a lost link); side runs as one more
+    task once the first host has started (the proxy's ports), and its failure ends the session.
+    """
+    config, link, timeout_s = prepared.config, prepared.link, prepared.timeout_s
+    make_link = prepared.make_link
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -184,7 +232,11 @@ async def _serve(
             loop.add_signal_handler(sig, stop.set)
     async with link:
         session = _make_host(link, config, timeout_s)
+        if hooks is not None:
+            hooks.attach(session)
         model = await session.start()
+        if hooks is not None:
+            hooks.started(session)
         print(format_summary(model), flush=True)
         backend = SessionBackend(
             session,
@@ -202,9 +254,16 @@ async def _serve(
         )
         waiter = asyncio.create_task(stop.wait())
         tasks = [server, waiter]
+        ends = {server, waiter}  # any of these ending ends the session
+        if side is not None:
+            side_task = asyncio.create_task(side())
+            tasks.append(side_task)
+            ends.add(side_task)
         if make_link is not None:
             tasks.append(
-                asyncio.create_task(_keep_connected(backend, arbiter, make_link, config, timeout_s))
+                asyncio.create_task(
+                    _keep_connected(backend, arbiter, make_link, config, timeout_s, hooks)
+                )
             )
         if args.input or config.devices:
             manager = DeviceManager(
@@ -218,13 +277,14 @@ async def _serve(
             )
             tasks.append(asyncio.create_task(manager.run()))
         try:
-            await asyncio.wait({server, waiter}, return_when=asyncio.FIRST_COMPLETED)
+            await asyncio.wait(ends, return_when=asyncio.FIRST_COMPLETED)
         finally:
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
             await backend.session.close()  # always: stop any jog with the handshake, let go
-        if not server.cancelled() and server.exception() is not None:
-            raise server.exception()  # type: ignore[misc]  # e.g. the PendantError sentence
+        for task in ends:
+            if task.done() and not task.cancelled() and task.exception() is not None:
+                raise task.exception()  # type: ignore[misc]  # e.g. the PendantError sentence
     print("smoothjog: stopped", flush=True)
     return 0

@@ -826,6 +826,10 @@ class Jogger:
                 if not self._may_jog():
                     if self.model.jog_lock is not None:
                         self._fault_now(now_s, f"jogging stopped: {self.model.jog_lock}", "")
+                        # A stick held through the other program's job is no new press: the
+                        # jog does not start again by itself when the lock is lifted.
+                        self._await_press = self._intent is not None
+                        self._intent = None
                     self._begin_stop(now_s)
                 else:
                     self._stream(now_s, out)

@@ -215,6 +215,17 @@ class Ledger:
             return tuple(self._entries)
         return tuple(e for e in self._entries if e.owner == owner)
 
+    def oldest(self) -> Entry | None:
+        """The oldest unanswered line on the wire: the one the controller is answering now.
+
+        Whatever a query prints before its `ok` ([GC:...] for `$G`, the `$$` listing) belongs to
+        this line, since Grbl handles lines one at a time, in order (firmware-facts §5.1). None
+        when nothing waits, or (relayed) when the oldest line has not reached the wire yet.
+        """
+        if not self._entries or not self._entries[0].on_wire:
+            return None
+        return self._entries[0]
+
     def waiting(self, owner: str) -> int:
         """How many of owner's lines wait for a reply."""
         return sum(1 for e in self._entries if e.owner == owner)

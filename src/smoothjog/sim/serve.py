@@ -14,14 +14,13 @@ import math
 import os
 import signal
 import sys
-import termios
-import tty
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from smoothjog.core.errors import SimError
 from smoothjog.core.firmware import DEFAULT_BAUD
+from smoothjog.pty_port import PtyPort
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import TraceSegment
 from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
@@ -164,23 +163,23 @@ class SimServer:
         self.firmware = build_firmware(opts)
         self.rig = SimRig(self.firmware, LinkModel(baud=opts.baud))
         self.sim = RealtimeSim(self.rig, self._on_line)
-        self._master_fd = -1
-        self._slave_fd = -1
+        self._pty: PtyPort | None = None
         self.pty_path: str | None = None
         self._server: asyncio.Server | None = None
         self.tcp_port: int | None = None
         self._clients: set[asyncio.StreamWriter] = set()
-        self._symlink_made = False
         #: `error:N` lines sent, by code, for the summary at the end.
         self.errors_sent: collections.Counter[str] = collections.Counter()
 
     async def serve(self, stop: asyncio.Event) -> None:
         """Open the ports, run until stop is set, then close everything."""
-        loop = asyncio.get_running_loop()
         runner = asyncio.create_task(self.sim.run())
         try:
             if self.opts.pty:
-                self._open_pty(loop)
+                # The simulator holds the pty's far end itself: it lives, and its output waits
+                # in it, whether or not a sender has it open (as a UART's wires would).
+                self._pty = PtyPort(self.sim.send, link_path=self.opts.link_path)
+                self.pty_path = self._pty.open()
             if self.opts.tcp_port is not None:
                 self._server = await asyncio.start_server(
                     self._on_client, "127.0.0.1", self.opts.tcp_port
@@ -193,7 +192,7 @@ class SimServer:
             with contextlib.suppress(asyncio.CancelledError):
                 await runner
             self.sim.catch_up()
-            await self._close(loop)
+            await self._close()
             if self.opts.trace_path is not None:
                 self.write_trace(self.opts.trace_path)
 
@@ -237,38 +236,6 @@ class SimServer:
             f" machine {self.firmware.machine.name}; Ctrl-C to stop"
         )
 
-    def _open_pty(self, loop: asyncio.AbstractEventLoop) -> None:
-        """A raw pseudo-terminal whose far end behaves like the controller's serial port."""
-        master, slave = os.openpty()
-        # Raw mode: no echo, no CR/LF translation; the bytes are the controller's bytes.
-        tty.setraw(slave, termios.TCSANOW)
-        os.set_blocking(master, False)
-        self._master_fd, self._slave_fd = master, slave
-        self.pty_path = os.ttyname(slave)
-        if self.opts.link_path is not None:
-            link = self.opts.link_path
-            if link.is_symlink():
-                link.unlink()
-            elif link.exists():
-                raise SimError(f"--link {link} exists and is not a symlink; choose another path")
-            try:
-                link.symlink_to(self.pty_path)
-            except OSError as exc:
-                raise SimError(f"cannot create --link {link}: {exc.strerror}") from None
-            self._symlink_made = True
-        loop.add_reader(master, self._on_pty_readable)
-
-    def _on_pty_readable(self) -> None:
-        """Bytes from whoever has the pty open."""
-        try:
-            data = os.read(self._master_fd, _READ_CHUNK_BYTES)
-        except BlockingIOError:
-            return
-        except OSError:
-            return  # EIO while no client has the port open; the slave fd we hold keeps it alive
-        if data:
-            self.sim.send(data)
-
     async def _on_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """One TCP client: its bytes go to the controller; it gets every line it sends."""
         self._clients.add(writer)
@@ -286,30 +253,22 @@ class SimServer:
         data = line + b"\r\n"
         if line.startswith(b"error:"):
             self.errors_sent[line[6:].decode("ascii", "replace")] += 1
-        if self._master_fd >= 0:
-            with contextlib.suppress(BlockingIOError, OSError):
-                # Nobody reading a full pty loses output, as a serial line with no listener would.
-                os.write(self._master_fd, data)
+        if self._pty is not None:
+            self._pty.write(data)  # nobody reading a full pty loses output
         for writer in list(self._clients):
             if not writer.is_closing():
                 writer.write(data)
 
-    async def _close(self, loop: asyncio.AbstractEventLoop) -> None:
+    async def _close(self) -> None:
         """Close ports, remove the symlink."""
         if self._server is not None:
             self._server.close()
             for writer in list(self._clients):
                 writer.close()
             await self._server.wait_closed()
-        if self._master_fd >= 0:
-            loop.remove_reader(self._master_fd)
-            os.close(self._master_fd)
-            os.close(self._slave_fd)
-            self._master_fd = self._slave_fd = -1
-        if self._symlink_made and self.opts.link_path is not None:
-            with contextlib.suppress(FileNotFoundError):
-                self.opts.link_path.unlink()
-            self._symlink_made = False
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
 
 
 def _print(text: str) -> None:
