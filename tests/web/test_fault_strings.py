@@ -438,6 +438,14 @@ def _describes() -> list[str]:
     return [SerialLink.describe(_SERIAL), TcpLink.describe(_TCP), SimLink.describe(_SIM)]  # type: ignore[arg-type]
 
 
+def _jog_locks() -> list[str]:
+    """Why another program holds the machine: a CNCjs job, a sender's job through the proxy."""
+    from smoothjog.links.cncjs import _WORKFLOW_LOCKS
+    from smoothjog.proxy import JOB_LOCK
+
+    return [*_WORKFLOW_LOCKS.values(), JOB_LOCK]
+
+
 def _pin_names() -> list[str]:
     from smoothjog.core.jogger import _PIN_NAMES
 
@@ -541,7 +549,10 @@ def _whb04b_selves() -> list[SimpleNamespace]:
 #: that make them; SKIP for a text that is another's (covered where it is made).
 SAMPLES: dict[str, Any] = {
     # The engine.
-    "jogger.self": [SimpleNamespace(_where_blocked=_where_blocked)],
+    "jogger.self": lambda: [
+        SimpleNamespace(_where_blocked=_where_blocked, model=SimpleNamespace(jog_lock=lock))
+        for lock in _jog_locks()
+    ],
     "jogger.resp": _CODES,
     "jogger.jogs": [0, 1, 3],
     "jogger.exc": lambda: [JogBuildError(t) for t in _jog_build_texts()],
@@ -580,8 +591,12 @@ SAMPLES: dict[str, Any] = {
     "jogline.line": ["$J=G21G91X1.5Y2.5Z0.5F1000"],
     "jogline.max_line_chars": [24],
     # The machine commands.
-    "control.self": [
-        SimpleNamespace(running=r, host=SimpleNamespace(link_error=None)) for r in _RUNNING
+    "control.self": lambda: [
+        SimpleNamespace(
+            running=r, host=SimpleNamespace(link_error=None, model=SimpleNamespace(jog_lock=lock))
+        )
+        for r in _RUNNING
+        for lock in _jog_locks()
     ],
     "control.what": _RUNNING,
     "control.word": ["G54", "G60"],
@@ -773,7 +788,7 @@ PASSTHROUGH = [
 LATIN_OK = {
     "smoothjog", "Grbl", "grblHAL", "FluidNC", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
     "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi", "udev", "hidraw",
-    "evdev", "spacenavd", "Lead",
+    "evdev", "spacenavd", "Lead", "CNCjs",
 }  # fmt: skip
 #: Grbl's own words: `error:15`, `$J=`, `$X`, G- and axis words, quoted values as sent.
 GRBL_WORDS = re.compile(
@@ -865,7 +880,7 @@ def jog_build_sites() -> list[Site]:
 
 #: Where a link says it was lost or closed, and where a console line fails, mid-session.
 LINK_LOST = ("_lost", "close")
-CONSOLE_FAILED = ("query", "_fail_console_entries")
+CONSOLE_FAILED = ("_ask", "_fail_console_entries")
 
 
 @cache
