@@ -262,3 +262,21 @@ def test_a_hold_during_a_jog_ends_it_and_leaves_nothing_to_resume(vh: VirtualHos
     assert not vh.host.busy()
     with pytest.raises(ControlRefused, match="nothing to resume"):
         run(vh, c.resume())
+
+
+def test_while_another_program_holds_the_machine_lines_wait_but_reset_and_overrides_pass(
+    vh: VirtualHost,
+) -> None:
+    """A sender's job (the proxy's lock): a line from the pendant would land in it."""
+    c = control(vh)
+    reason = "the sender is running a job: jogging waits until it is idle"
+    vh.host.set_jog_lock("sender", reason)
+    assert c.refusal() == reason
+    for command in (c.unlock(), c.console("G0 X-5"), c.set_work_zero(["X"]), c.select_wcs("G55")):
+        with pytest.raises(ControlRefused, match="the sender is running a job"):
+            run(vh, command)
+    assert vh.host.ledger.stats.lines[CONSOLE] == 0
+    assert run(vh, c.override("feed", "+10")).ok
+    assert run(vh, c.soft_reset()).ok
+    vh.host.set_jog_lock("sender", None)
+    assert c.refusal() is None

@@ -79,14 +79,22 @@ class MachineControl:
         self.running: str | None = None
 
     # ----------------------------------------------------------------- when
-    def refusal(self) -> str | None:
-        """Why no command may start now, in words, or None when one may."""
+    def refusal(self, *, locked_ok: bool = False) -> str | None:
+        """Why no command may start now, in words, or None when one may.
+
+        While another program holds the machine (the jog lock: a sender's job through the
+        proxy, a CNCjs job) a line would land in the middle of its job and change it, so lines
+        wait too, in the lock's words; locked_ok lets through what cannot change a job (an
+        override byte, the reset that ends it).
+        """
         host = self.host
         if host.link_error is not None:
             return "the connection to the controller is lost"
         if self.running is not None:
             return f"wait: {self.running} has not finished"
         state = host.model.state
+        if host.model.jog_lock is not None and not locked_ok:
+            return host.model.jog_lock
         if host.busy() or state in MOVING_STATES:
             return "the machine is moving: press STOP and wait until it stands still"
         return None
@@ -116,7 +124,7 @@ class MachineControl:
 
     async def soft_reset(self) -> CommandResult:
         """Ctrl-X: the controller restarts; the host reads its settings again before any jog."""
-        async with self._running("resetting"):
+        async with self._running("resetting", locked_ok=True):
             host = self.host
             before = host.model.reset_count
             host.send_realtime(CONSOLE, realtime.RESET)
@@ -163,7 +171,7 @@ class MachineControl:
                     f"no override {kind!r}; the overrides are {', '.join(OVERRIDE_KINDS)}"
                 )
             raise ControlRefused(f"{kind} override has no step {step!r}; use {', '.join(steps)}")
-        reason = self.refusal()
+        reason = self.refusal(locked_ok=True)
         if reason is not None:
             raise ControlRefused(reason)
         self.host.send_realtime(CONSOLE, byte)
@@ -235,9 +243,9 @@ class MachineControl:
 
     # ----------------------------------------------------------------- internals
     @contextlib.asynccontextmanager
-    async def _running(self, what: str) -> AsyncIterator[None]:
+    async def _running(self, what: str, *, locked_ok: bool = False) -> AsyncIterator[None]:
         """Mark a command as running for its whole length; refuse it when another may not."""
-        reason = self.refusal()
+        reason = self.refusal(locked_ok=locked_ok)
         if reason is not None:
             raise ControlRefused(reason)
         self.running = what

@@ -439,10 +439,11 @@ def _describes() -> list[str]:
 
 
 def _jog_locks() -> list[str]:
-    """Why another program holds the machine (the CNCjs link's workflow states)."""
+    """Why another program holds the machine: a CNCjs job, a sender's job through the proxy."""
     from smoothjog.links.cncjs import _WORKFLOW_LOCKS
+    from smoothjog.proxy import JOB_LOCK
 
-    return list(_WORKFLOW_LOCKS.values())
+    return [*_WORKFLOW_LOCKS.values(), JOB_LOCK]
 
 
 def _pin_names() -> list[str]:
@@ -590,8 +591,12 @@ SAMPLES: dict[str, Any] = {
     "jogline.line": ["$J=G21G91X1.5Y2.5Z0.5F1000"],
     "jogline.max_line_chars": [24],
     # The machine commands.
-    "control.self": [
-        SimpleNamespace(running=r, host=SimpleNamespace(link_error=None)) for r in _RUNNING
+    "control.self": lambda: [
+        SimpleNamespace(
+            running=r, host=SimpleNamespace(link_error=None, model=SimpleNamespace(jog_lock=lock))
+        )
+        for r in _RUNNING
+        for lock in _jog_locks()
     ],
     "control.what": _RUNNING,
     "control.word": ["G54", "G60"],
@@ -894,7 +899,7 @@ def jog_build_sites() -> list[Site]:
 
 #: Where a link says it was lost or closed, and where a console line fails, mid-session.
 LINK_LOST = ("_lost", "close")
-CONSOLE_FAILED = ("query", "_fail_console_entries")
+CONSOLE_FAILED = ("_ask", "_fail_console_entries")
 
 
 @cache
