@@ -145,8 +145,6 @@ class CncjsLink(Link):
         self.workflow = "idle"
         self._connected: asyncio.Future[str | None] | None = None
         self._settings_seen: asyncio.Event | None = None
-        #: Lines other clients wrote, as echoed (for tests and logs).
-        self.foreign_lines = 0
 
     def describe(self) -> str:
         """Where the controller is, for messages."""
