@@ -26,6 +26,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -123,6 +124,27 @@ def stop_process(proc: subprocess.Popen[bytes], grace_s: float = STOP_GRACE_S) -
 # --- the simulator ----------------------------------------------------------------------------
 
 
+def _wait_ready(
+    proc: subprocess.Popen[bytes],
+    ready: Callable[[], bool],
+    timeout_s: float,
+    poll_s: float,
+    *,
+    exited: Callable[[int], str],
+    late: str,
+    log_path: Path,
+) -> None:
+    """Poll ready() until it holds; RigError with the log's tail if proc exits or time is up."""
+    end = time.monotonic() + timeout_s
+    while not ready():
+        code = proc.poll()
+        if code is not None:
+            raise RigError(f"{exited(code)}:\n{log_tail(log_path)}")
+        if time.monotonic() > end:
+            raise RigError(f"{late}:\n{log_tail(log_path)}")
+        time.sleep(poll_s)
+
+
 class SimProcess:
     """The smoothjog simulator on a pty, as its own process, with a stable symlink to it.
 
@@ -176,19 +198,16 @@ class SimProcess:
     def wait_ready(self, timeout_s: float = SIM_START_TIMEOUT_S) -> None:
         """Wait until the --link symlink points at a live pty; RigError with its log if not."""
         assert self.proc is not None, "spawn() first"
-        end = time.monotonic() + timeout_s
-        while not self.link.exists():  # exists() follows the link: the pty itself is there
-            if self.proc.poll() is not None:
-                raise RigError(
-                    f"the simulator exited with {self.proc.returncode} before making"
-                    f" {self.link}:\n{log_tail(self.log_path)}"
-                )
-            if time.monotonic() > end:
-                raise RigError(
-                    f"the simulator made no {self.link} in {timeout_s:.0f} s:\n"
-                    f"{log_tail(self.log_path)}"
-                )
-            time.sleep(0.02)
+        # exists() follows the link: the pty itself is there.
+        _wait_ready(
+            self.proc,
+            self.link.exists,
+            timeout_s,
+            0.02,
+            exited=lambda code: f"the simulator exited with {code} before making {self.link}",
+            late=f"the simulator made no {self.link} in {timeout_s:.0f} s",
+            log_path=self.log_path,
+        )
 
     def start(self) -> None:
         """Start and wait for the pty."""
@@ -279,19 +298,18 @@ class CncjsServer:
     def wait_ready(self, timeout_s: float = CNCJS_START_TIMEOUT_S) -> None:
         """Wait until http://127.0.0.1:<port>/ answers; RigError with CNCjs's output if not."""
         assert self.proc is not None, "spawn() first"
-        end = time.monotonic() + timeout_s
-        while not self._answers():
-            if self.proc.poll() is not None:
-                raise RigError(
-                    f"CNCjs exited with {self.proc.returncode} before answering on {self.url}"
-                    f" (log {self.log_path}):\n{log_tail(self.log_path)}"
-                )
-            if time.monotonic() > end:
-                raise RigError(
-                    f"CNCjs did not answer on {self.url} within {timeout_s:.0f} s"
-                    f" (log {self.log_path}):\n{log_tail(self.log_path)}"
-                )
-            time.sleep(0.05)
+        _wait_ready(
+            self.proc,
+            self._answers,
+            timeout_s,
+            0.05,
+            exited=lambda code: (
+                f"CNCjs exited with {code} before answering on {self.url} (log {self.log_path})"
+            ),
+            late=f"CNCjs did not answer on {self.url} within {timeout_s:.0f} s"
+            f" (log {self.log_path})",
+            log_path=self.log_path,
+        )
 
     def start(self) -> None:
         """Start and wait until it answers."""

@@ -27,6 +27,7 @@ from smoothjog.host import Host
 from smoothjog.links.cncjs import CncjsLink
 from smoothjog.links.cncjs_auth import make_token
 from tests.cncjs.harness import CncjsRig
+from tests.test_cli_jog import run_smoothjog
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -225,26 +226,12 @@ def _cncjs_args(rig: CncjsRig) -> list[str]:
 
 
 def test_info_and_jog_replay_through_cncjs(cncjs: CncjsRig, tmp_path: Path) -> None:
-    info = subprocess.run(
-        _smoothjog("info", *_cncjs_args(cncjs)),
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        stdin=subprocess.DEVNULL,
-    )
+    info = run_smoothjog("info", *_cncjs_args(cncjs), timeout_s=60)
     assert info.returncode == 0, info.stderr
     assert "grbl 1.1h" in info.stdout
     replay = tmp_path / "replay.jsonl"
     replay.write_text('{"t": 0.1, "axes": {"x": -1}, "speed": 0.5}\n{"t": 0.8, "axes": {"x": 0}}\n')
-    jog = subprocess.run(
-        _smoothjog("jog", *_cncjs_args(cncjs), "--replay", str(replay)),
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        stdin=subprocess.DEVNULL,
-    )
+    jog = run_smoothjog("jog", *_cncjs_args(cncjs), "--replay", str(replay), timeout_s=60)
     assert jog.returncode == 0, jog.stderr
     assert "CNCjs" in jog.stdout + jog.stderr
 

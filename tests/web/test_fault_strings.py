@@ -420,6 +420,7 @@ _FAKE_LIMITS = SimpleNamespace(limits=SimpleNamespace(axes=("X", "Y", "Z")))
 _CODES = [SimpleNamespace(code=c) for c in (*range(1, 39), 40)]
 _SERIAL = SimpleNamespace(path="/dev/ttyUSB0", baud=115200)
 _TCP = SimpleNamespace(host="192.168.1.20", port=23)
+_CNCJS = SimpleNamespace(url="http://127.0.0.1:8000", port="/dev/ttyUSB0")
 _SIM = SimpleNamespace(
     firmware=SimpleNamespace(
         profile=SimpleNamespace(name="grbl-1.1h"), machine=SimpleNamespace(name="hobby-router")
@@ -431,11 +432,17 @@ _RUNNING += ["selecting G54", "selecting G59"]
 
 
 def _describes() -> list[str]:
+    from smoothjog.links.cncjs import CncjsLink
     from smoothjog.links.serial import SerialLink
     from smoothjog.links.sim import SimLink
     from smoothjog.links.tcp import TcpLink
 
-    return [SerialLink.describe(_SERIAL), TcpLink.describe(_TCP), SimLink.describe(_SIM)]  # type: ignore[arg-type]
+    return [
+        SerialLink.describe(_SERIAL),  # type: ignore[arg-type]
+        TcpLink.describe(_TCP),  # type: ignore[arg-type]
+        SimLink.describe(_SIM),  # type: ignore[arg-type]
+        CncjsLink.describe(_CNCJS),  # type: ignore[arg-type]
+    ]
 
 
 def _jog_locks() -> list[str]:
@@ -653,7 +660,7 @@ SAMPLES: dict[str, Any] = {
             port="/dev/ttyUSB0",
             _writer_task=task,
             timeout_s=5.0,
-            describe=lambda: "/dev/ttyUSB0 through CNCjs at http://127.0.0.1:8000",
+            describe=lambda: _describes()[3],
         )
         for task in (None, object())
     ],
