@@ -1,4 +1,4 @@
-"""`python -m bench NAME [options]`: the benchmarks (jog fuzz micro sim cpu deadman stopat)."""
+"""`python -m bench NAME [options]`: jog fuzz micro sim cpu cncjs deadman stopat."""
 
 from __future__ import annotations
 
@@ -30,6 +30,10 @@ def main() -> int:
         from bench import cpu
 
         return cpu.main(rest)
+    if name == "cncjs":
+        from bench import cncjs
+
+        return cncjs.main(rest)
     if name == "stopat":
         from bench import stopat
 
@@ -46,7 +50,7 @@ def main() -> int:
         code |= bench_sim_speed.main()
         return code
     print(
-        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, deadman or stopat",
+        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, deadman or stopat",
         file=sys.stderr,
     )
     return 2

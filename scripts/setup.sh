@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Shared set-up for scripts/run and scripts/test: a project virtualenv with smoothjog installed.
-# Usage: source scripts/setup.sh run|test   ("test" also installs test tools and Chromium).
+# Usage: source scripts/setup.sh run|test   ("test" also installs test tools, Chromium and CNCjs).
 # The mode is required: a sourced script sees its caller's arguments when given none.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -47,5 +47,19 @@ if [ "$EXTRA" = "test" ] && [ ! -x /usr/bin/chromium ]; then
   if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
   $SUDO apt-get update -qq >&2
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >&2
+fi
+
+# A real CNCjs for the CNCjs link's tests (tests/cncjs), pinned by tools/cncjs/package-lock.json.
+CNCJS_DIR="$ROOT/tools/cncjs"
+CNCJS_STAMP="$CNCJS_DIR/node_modules/.smoothjog-installed"
+if [ "$EXTRA" = "test" ] && { [ ! -f "$CNCJS_DIR/node_modules/cncjs/bin/cncjs" ] ||
+     [ ! -f "$CNCJS_STAMP" ] || [ "$CNCJS_DIR/package-lock.json" -nt "$CNCJS_STAMP" ]; }; then
+  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    echo "setup: the CNCjs tests need Node.js 18+; install nodejs and npm (apt-get install nodejs npm) and retry." >&2
+    return 1 2>/dev/null || exit 1
+  fi
+  echo "setup: installing CNCjs into tools/cncjs (npm ci) for the CNCjs link tests" >&2
+  (cd "$CNCJS_DIR" && npm ci --no-audit --no-fund --prefer-offline --loglevel=error >&2)
+  touch "$CNCJS_STAMP"
 fi
 export PATH="$VENV/bin:$PATH"

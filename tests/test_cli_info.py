@@ -100,6 +100,26 @@ def _free_port() -> int:
         (["--port", "/dev/ttyX", "--baud", "fast"], ["--baud", "not a whole number"]),
         (["--port", "/dev/ttyX", "--timeout", "-1"], ["--timeout", "above 0"]),
         (["--bogus"], ["unrecognized arguments"]),
+        # CNCjs: every way it fails before anything connects.
+        (["--cncjs", "http://127.0.0.1:9"], ["--cncjs needs --cncjs-port"]),
+        (["--cncjs", "cnc:8000", "--cncjs-port", "/dev/x"], ["not a CNCjs address"]),
+        (["--cncjs-port", "/dev/ttyUSB0"], ["--cncjs-port goes with --cncjs URL"]),
+        (
+            ["--cncjs-user", "a", "--cncjs-token", "t.o.k"],
+            ["--cncjs-token and --cncjs-user go with --cncjs URL"],
+        ),
+        (["--cncjs", "http://h", "--port", "/dev/x"], ["not allowed with"]),
+        (
+            ["--cncjs", "http://127.0.0.1:9", "--cncjs-port", "/dev/x", "--cncjs-token", "abc"],
+            ["not a JSON Web Token"],
+        ),
+        (
+            [
+                *("--cncjs", "http://127.0.0.1:9", "--cncjs-port", "/dev/x"),
+                *("--cncjs-config", "/nonexistent/.cncrc"),
+            ],
+            ["no CNCjs config at /nonexistent/.cncrc"],
+        ),
         (["--config", "/nonexistent/smoothjog.toml", "--port", "/dev/ttyX"], ["does not exist"]),
     ],
 )

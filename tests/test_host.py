@@ -222,7 +222,9 @@ async def test_close_while_jogging_stops_the_machine_first(firmware: str) -> Non
         await session.start()
         session.set_intent(ContinuousIntent({"X": -1.0, "Y": -0.5}, 1.0))
         await eventually(lambda: link.firmware.mpos_mm()[0] < -10.0, "the machine moving")
-        assert link.firmware.status_state() == "Jog"
+        # The engine is jogging (on a loaded machine the controller may be between two lines
+        # for an instant, so its own state is not what is asserted here).
+        assert session.busy()
     finally:
         await close_within(session)
     assert session.engine is not None

@@ -177,6 +177,9 @@ class Host:
         if self.tuning.byte_s is None and link.byte_time_s() is not None:
             # The engine sizes its blocks, polls and report ages by the wire it really has.
             self.tuning = dataclasses.replace(self.tuning, byte_s=link.byte_time_s())
+        idle_s = link.idle_poll_s()
+        if idle_s is not None and idle_s > self.tuning.poll_idle_s:
+            self.tuning = dataclasses.replace(self.tuning, poll_idle_s=idle_s)
         self.keepouts = tuple(keepouts)
         self.handshake_timeout_s = handshake_timeout_s
         self.on_event = on_event
@@ -225,7 +228,7 @@ class Host:
         self._lost = asyncio.Event()
         self._write_lock = asyncio.Lock()
         self._reading = True
-        if self.link.attach_relay(self._on_wire_line, self._on_jog_lock):
+        if self.link.attach_relay(self._on_wire_line, self._on_jog_lock, self._on_relay_moved):
             self.ledger.relayed = True
         # Lines come straight from the link's read callback where it can give them (one task
         # switch fewer per line); a reader task otherwise.
@@ -542,6 +545,13 @@ class Host:
         """A relay put a line on the wire: confirm an own one or count a foreign writer's."""
         if self._reading:
             self.ledger.on_echo(text, foreign(writer), self.now_s())
+
+    def _on_relay_moved(self) -> None:
+        """The relay saw the controller change (another client moved it): ask for a report."""
+        engine = self.engine
+        if engine is not None and self._reading:
+            engine.ask_status()
+            self._poke()
 
     def _on_jog_lock(self, reason: str | None) -> None:
         """Another program took or gave back the machine (a CNCjs job began or ended)."""

@@ -1432,3 +1432,21 @@ def test_jog_lock_of_another_program(
     h = run_row(harness, script, expect)
     if h.model.jog_lock is not None:
         assert h.engine.can_jog() == (False, JOB)
+
+
+def test_a_relay_that_saw_a_change_gets_a_report_asked_for_at_once() -> None:
+    h = EngineHarness(tuning=JogTuning(poll_idle_s=2.0))
+    assert kinds(h.poll()) == ["?"]
+    h.status("Idle", START_MPOS)
+    h.advance(0.3)
+    assert kinds(h.poll()) == []  # the next routine one is 2 s away
+    h.engine.ask_status()
+    assert kinds(h.poll()) == ["?"]
+    h.status("Idle", START_MPOS)
+    # While a jog runs the engine polls by itself: the hint changes nothing then.
+    h.intent(ContinuousIntent({"X": -1.0}, 1.0))
+    h.poll()
+    asked = h.engine._status_asked_s
+    h.engine.ask_status()
+    assert h.engine._status_asked_s == asked
+    assert h.engine._last_status_sent_s > -math.inf

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import signal
 import subprocess
@@ -13,10 +14,10 @@ from pathlib import Path
 import pytest
 import serial
 
-from smoothjog.core.errors import LinkError
+from smoothjog.core.errors import LinkError, SimError
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
-from smoothjog.sim.serve import ServeOptions, SimServer
+from smoothjog.sim.serve import ServeOptions, SimServer, read_trace
 
 
 def _read_until(port: serial.Serial, predicate: object, timeout_s: float = 5.0) -> list[str]:
@@ -66,6 +67,56 @@ def test_cli_pty_answers_like_grbl_and_cleans_up(tmp_path: Path) -> None:
     )
     assert not link.exists()
     assert not link.is_symlink()
+
+
+def test_cli_trace_holds_the_jog_on_the_monotonic_clock(tmp_path: Path) -> None:
+    link = tmp_path / "ttyGRBL"
+    trace_path = tmp_path / "trace.jsonl"
+    argv = [sys.executable, "-m", "smoothjog", "sim", "--machine", "hobby-router"]
+    argv += ["--link", str(link), "--trace", str(trace_path)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        assert "smoothjog sim:" in proc.stdout.readline()
+        with serial.Serial(str(link), 115200, timeout=0.2) as port:
+            sent_s = time.monotonic()
+            port.write(b"$J=G91 X-10 F3000\n")
+            assert _read_until(port, lambda x: x in ("ok", "error:15"))[-1] == "ok"
+
+            def at_rest() -> bool:
+                port.write(b"?")
+                return _read_until(port, lambda x: x.startswith("<"))[-1].startswith("<Idle")
+
+            time.sleep(0.1)
+            end = time.monotonic() + 10
+            while not at_rest():
+                assert time.monotonic() < end, "the jog never ended"
+                time.sleep(0.05)
+            rest_s = time.monotonic()
+        assert not trace_path.exists()  # written when the simulator stops
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=10)
+    assert proc.returncode == 0
+    trace = read_trace(trace_path)
+    moving = [seg for seg in trace if seg.speed_mm_s > 0]
+    assert moving
+    # The jog ran between the write and the Idle report, on this process's clock.
+    assert sent_s < moving[0].t0_s < moving[-1].t1_s < rest_s
+    assert moving[-1].t1_s - moving[0].t0_s > 10 / 50  # 10 mm at 50 mm/s at most
+    assert sum(seg.t1_s - seg.t0_s for seg in moving) == pytest.approx(
+        moving[-1].t1_s - moving[0].t0_s, rel=0.05
+    )
+    assert moving[0].start_mm == pytest.approx((-1.0, -1.0, -1.0))
+    assert moving[-1].end_mm == pytest.approx((-11.0, -1.0, -1.0), abs=1e-3)
+    assert sum(math.dist(s.start_mm, s.end_mm) for s in trace) == pytest.approx(10.0, abs=1e-3)
+
+
+def test_a_trace_file_that_is_not_one_is_a_sentence(tmp_path: Path) -> None:
+    bad = tmp_path / "trace.jsonl"
+    bad.write_text('{"t0_s": 1.0, "t1_s": 2.0, "start_mm": [0, 0, 0]}\n')
+    with pytest.raises(SimError, match=r"trace\.jsonl:1: not a trace segment"):
+        read_trace(bad)
 
 
 async def _wait_for_port(server: SimServer) -> None:

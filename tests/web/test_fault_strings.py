@@ -647,6 +647,22 @@ SAMPLES: dict[str, Any] = {
     "tcp.self": [SimpleNamespace(describe=lambda: _describes()[1])],
     "tcp.exc": [SimpleNamespace(strerror="Connection reset by peer")],
     "tcp._lost.reason": lambda: call_args("links/tcp.py", "_lost", 0),
+    "cncjs.self": [
+        SimpleNamespace(
+            url="http://127.0.0.1:8000",
+            port="/dev/ttyUSB0",
+            _writer_task=task,
+            timeout_s=5.0,
+            describe=lambda: "/dev/ttyUSB0 through CNCjs at http://127.0.0.1:8000",
+        )
+        for task in (None, object())
+    ],
+    "pendant._print_notice.text": SKIP,  # a device's sentence (devices.py), covered there
+    "pendant.link": lambda: [SimpleNamespace(describe=lambda d=d: d) for d in _describes()],
+    "cncjs._lost.reason": lambda: call_args("links/cncjs.py", "_lost", 0),
+    "cncjs.kind": ["Marlin"],
+    "cncjs.detail": [None, "Error: No such file or directory, cannot open /dev/ttyUSB0"],
+    "cncjs.exc": [ConnectionResetError("Connection reset by peer")],
     "host.self": lambda: [
         SimpleNamespace(describe=lambda d=d: d, link=SimpleNamespace(describe=lambda d=d: d))
         for d in _describes()
@@ -757,10 +773,13 @@ SAMPLES: dict[str, Any] = {
 
 #: Texts sent as they are, however English (an OS's error, a name the user gave, ...).
 PASSTHROUGH = [
+    "Error: No such file or directory, cannot open /dev/ttyUSB0",  # CNCjs's own error text
     "Input/output error",
     "Connection reset by peer",
     "/dev/ttyUSB0",
     "tcp://192.168.1.20:23",
+    "http://127.0.0.1:8000",  # a CNCjs server's address
+    "Marlin",  # a controller type as CNCjs names it
     "grbl-1.1h",
     "hobby-router",
     "Tool",  # a state Grbl 1.1h does not have, named as the controller names it
@@ -786,9 +805,9 @@ PASSTHROUGH = [
 ]
 #: Words the Chinese keeps: names, units, Grbl's states in its own spelling, acronyms.
 LATIN_OK = {
-    "smoothjog", "Grbl", "grblHAL", "FluidNC", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
+    "smoothjog", "Grbl", "grblHAL", "FluidNC", "CNCjs", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
     "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi", "udev", "hidraw",
-    "evdev", "spacenavd", "Lead", "CNCjs",
+    "evdev", "spacenavd", "Lead",
 }  # fmt: skip
 #: Grbl's own words: `error:15`, `$J=`, `$X`, G- and axis words, quoted values as sent.
 GRBL_WORDS = re.compile(
@@ -905,6 +924,8 @@ def other_sites() -> list[Site]:
         # A link lost mid-session (opening one fails before the pendant starts).
         *_sites("links/serial.py", _calls("LinkError", 0), only=LINK_LOST),
         *_sites("links/tcp.py", _calls("LinkError", 0), only=LINK_LOST),
+        *_sites("links/cncjs.py", _calls("LinkError", 0), only=LINK_LOST),
+        *_sites("cli/pendant.py", _calls("announce", 0)),  # the link back after a loss
         *_sites("host.py", _calls("LinkError", 0)),
         *_sites("host.py", _calls("ConnectError", 0), only=CONSOLE_FAILED),
     ]

@@ -16,7 +16,7 @@ from smoothjog.config import Config, ConnectionConfig, load_config
 from smoothjog.core.errors import LinkError
 from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.links.base import Link
-from smoothjog.links.cncjs import CncjsLink
+from smoothjog.links.cncjs import CncjsLink, parse_cncjs_url
 from smoothjog.links.cncjs_auth import make_token
 from smoothjog.links.serial import DEFAULT_WAIT_BANNER_S, SerialLink
 from smoothjog.links.sim import SimLink
@@ -121,10 +121,17 @@ def connection_from_args(
     if port is not None or connect is not None or cncjs is not None:
         # Naming a controller on the command line replaces the config's choice entirely.
         base = replace(base, port=port, connect=connect, cncjs=cncjs)
+    given = []
     for key in ("cncjs_port", "cncjs_config", "cncjs_token", "cncjs_user"):
         value = getattr(args, key, None)
         if value is not None:
             base = replace(base, **{key: value})
+            given.append("--" + key.replace("_", "-"))
+    if given and base.cncjs is None:
+        raise LinkError(
+            f"{' and '.join(given)} {'goes' if len(given) == 1 else 'go'} with --cncjs URL (the"
+            " CNCjs server that owns the port): add it, or leave them out"
+        )
     baud: int | None = getattr(args, "baud", None)
     timeout_s: float | None = getattr(args, "timeout", None)
     if baud is not None:
@@ -145,6 +152,7 @@ def link_for(connection: ConnectionConfig) -> Link | None:
                 "--cncjs needs --cncjs-port: the controller's port as CNCjs names it, e.g."
                 " /dev/ttyUSB0 (CNCjs's port list shows it)"
             )
+        parse_cncjs_url(connection.cncjs)  # a wrong address is told before a missing secret
         token = make_token(
             token=connection.cncjs_token,
             config_path=connection.cncjs_config,

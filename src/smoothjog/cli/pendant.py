@@ -82,7 +82,7 @@ def register(subparsers: Any) -> None:
 def add_session_args(parser: argparse.ArgumentParser) -> None:
     """The controller, built-in simulator, pendant and device options of a session command."""
     add_connection_args(parser)
-    sim = parser.add_argument_group("built-in simulator (when no --port/--connect)")
+    sim = parser.add_argument_group("built-in simulator (when no --port/--connect/--cncjs)")
     sim.add_argument("--firmware", choices=FIRMWARE_NAMES)
     sim.add_argument(
         "--machine",

@@ -57,6 +57,18 @@ def register(subparsers: Any) -> None:
         "--no-pty", action="store_true", help="do not open a pseudo-terminal (needs --tcp)"
     )
     parser.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help=(
+            "when stopped, write the ground truth to FILE: every motion segment the machine"
+            " executed, as JSON Lines {t0_s, t1_s, start_mm, end_mm}, one per segment, in order;"
+            " the machine went from start_mm to end_mm (machine coordinates, mm) at constant"
+            " speed from t0_s to t1_s, times on this computer's monotonic clock (Python's"
+            " time.monotonic())"
+        ),
+    )
+    parser.add_argument(
         "--baud",
         type=int,
         default=DEFAULT_BAUD,
@@ -87,5 +99,6 @@ def run(args: argparse.Namespace) -> int:
         pty=not args.no_pty,
         tcp_port=args.tcp,
         baud=args.baud,
+        trace_path=args.trace,
     )
     return asyncio.run(serve_until_signal(opts))

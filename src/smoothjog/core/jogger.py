@@ -2239,6 +2239,13 @@ class Jogger:
             fault=self._fault,
         )
 
+    def ask_status(self) -> None:
+        """Someone saw the controller change: ask for a report at the next poll (while idle;
+        a jog polls often enough by itself)."""
+        if self.phase is Phase.IDLE:
+            self._last_status_sent_s = -math.inf
+            self._changed = True
+
     def clear_fault(self) -> None:
         """Forget the last fault (the user saw it)."""
         self._fault = None

@@ -299,15 +299,25 @@ class Link(ABC):
         self,
         on_wire_line: Callable[[str, str], None],
         on_jog_lock: Callable[[str | None], None],
+        on_moved: Callable[[], None],
     ) -> bool:
         """For a relay other clients write through too (CNCjs); False for a link of one writer.
 
         A relay calls on_wire_line(text, writer) for every line it puts on the controller's
-        wire, its own and other clients', in wire order (the ledger places foreign lines by it),
-        and on_jog_lock(reason) when jogging must wait for another program, None when it may
-        go on.
+        wire, its own and other clients', in wire order (the ledger places foreign lines by it);
+        on_jog_lock(reason) when jogging must wait for another program, None when it may go on;
+        and on_moved() when the relay's own view of the controller changed (so a fresh status
+        report is worth asking for: see idle_poll_s).
         """
         return False
+
+    def idle_poll_s(self) -> float | None:
+        """How seldom the host may ask for status while nothing moves (None: its own rate).
+
+        Every `?` through a relay is shown to the relay's other clients (CNCjs's console), and
+        the relay tells of changes itself (on_moved), so it asks for less.
+        """
+        return None
 
     def rx_reserve_bytes(self) -> int:
         """RX-buffer bytes kept for lines the far side writes without telling (0: none)."""

@@ -49,6 +49,8 @@ CNCJS_POLL_BYTES = 3
 #: command, another pendant's jog line). An assumption: longer foreign lines written in that
 #: instant could still overrun the controller, which no pendant can prevent.
 FOREIGN_ALLOWANCE_BYTES = 32
+#: How seldom smoothjog asks for status through CNCjs while nothing moves (see idle_poll_s).
+IDLE_POLL_S = 2.0
 #: Writers as CNCjs names them in an echo's context (`source`).
 _DEFAULT_WRITER = "cncjs"
 #: A line CNCjs decorated with a description in brackets: the controller's own text is group 1.
@@ -135,7 +137,10 @@ class CncjsLink(Link):
         self._error: LinkError | None = None
         self._partial = ""
         self._on_wire_line: Callable[[str, str], None] | None = None
+        self._early_echoes: list[tuple[str, str]] = []
         self._on_jog_lock: Callable[[str | None], None] | None = None
+        self._on_moved: Callable[[], None] | None = None
+        self._last_state: object = None
         #: The newest workflow state CNCjs reported ("idle", "running", "paused").
         self.workflow = "idle"
         self._connected: asyncio.Future[str | None] | None = None
@@ -151,11 +156,24 @@ class CncjsLink(Link):
         self,
         on_wire_line: Callable[[str, str], None],
         on_jog_lock: Callable[[str | None], None],
+        on_moved: Callable[[], None],
     ) -> bool:
-        """Hand every echoed line and every change of CNCjs's workflow to the host."""
+        """Hand every echoed line, every change of CNCjs's workflow and of its view of the
+        controller to the host."""
         self._on_wire_line, self._on_jog_lock = on_wire_line, on_jog_lock
+        self._on_moved = on_moved
+        # Lines echoed while opening (CNCjs's own `$$`) come first: their replies may still be
+        # on their way, queued in the inbox behind them.
+        early, self._early_echoes = self._early_echoes, []
+        for line, writer in early:
+            on_wire_line(line, writer)
         on_jog_lock(_WORKFLOW_LOCKS.get(self.workflow))
         return True
+
+    def idle_poll_s(self) -> float:
+        """CNCjs's console shows every client's `?`: while idle, ask seldom and rely on CNCjs's
+        own state reports (Grbl:state, sent when something changed) to ask at once."""
+        return IDLE_POLL_S
 
     def rx_reserve_bytes(self) -> int:
         """CNCjs's unseen `$G` poll and room for one line of another client in flight."""
@@ -172,6 +190,7 @@ class CncjsLink(Link):
         self._connected = loop.create_future()
         self._settings_seen = asyncio.Event()
         self._inbox = LineInbox()
+        self._early_echoes = []
         self._error = None
         sio = socketio.AsyncClient(reconnection=False)
         self._register(sio)
@@ -215,9 +234,11 @@ class CncjsLink(Link):
                 )
             if self._error is not None:
                 raise self._error
-            # CNCjs reads `$$` once it has seen the controller: wait for that so its lines are
-            # not mistaken for answers to the handshake. A port CNCjs already had open replays
-            # its settings at once.
+            # CNCjs takes a freshly opened port as ready only after a banner or a status report
+            # (it asks with `?` 2 s later by itself): ask now. Then it reads `$$`: wait for that
+            # so its lines are not mistaken for answers to the handshake. A port CNCjs already
+            # had open replays its settings at once.
+            await sio.emit("write", (self.port, "?"))
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._settings_seen.wait(), self.timeout_s)
         except BaseException:
@@ -267,6 +288,7 @@ class CncjsLink(Link):
         sio.on("serialport:error", self._on_error)
         sio.on("workflow:state", self._on_workflow)
         sio.on("Grbl:settings", self._on_settings)
+        sio.on("Grbl:state", self._on_state)
 
     def _on_connect(self) -> None:
         if self._connected is not None and not self._connected.done():
@@ -287,13 +309,14 @@ class CncjsLink(Link):
         if not isinstance(data, str):
             return
         lines, self._partial = wire_lines(data, self._partial)
-        if not lines or self._on_wire_line is None:
-            return
         writer = _DEFAULT_WRITER
         if isinstance(context, dict) and isinstance(context.get("source"), str):
             writer = f"{_DEFAULT_WRITER}-{context['source']}"
         for line in lines:
-            self._on_wire_line(line, writer)
+            if self._on_wire_line is None:
+                self._early_echoes.append((line, writer))
+            else:
+                self._on_wire_line(line, writer)
 
     def _on_open(self, data: object = None) -> None:
         if not isinstance(data, dict) or data.get("port") != self.port:
@@ -328,6 +351,18 @@ class CncjsLink(Link):
         self.workflow = state
         if self._on_jog_lock is not None:
             self._on_jog_lock(_WORKFLOW_LOCKS.get(state))
+
+    def _on_state(self, data: object = None) -> None:
+        # CNCjs sends its view of the controller (from its own 4 Hz `?`) when it changed; only
+        # the state and position matter here, not its modal-state echo of every `$G`.
+        status = data.get("status") if isinstance(data, dict) else None
+        if not isinstance(status, dict):
+            return
+        key = (status.get("activeState"), str(status.get("mpos")), str(status.get("wpos")))
+        if key != self._last_state:
+            self._last_state = key
+            if self._on_moved is not None:
+                self._on_moved()
 
     def _on_settings(self, data: object = None) -> None:
         settings = data.get("settings") if isinstance(data, dict) else None

@@ -9,6 +9,9 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import json
+import math
+import os
 import signal
 import sys
 from collections.abc import Callable
@@ -19,6 +22,7 @@ from smoothjog.core.errors import SimError
 from smoothjog.core.firmware import DEFAULT_BAUD
 from smoothjog.pty_port import PtyPort
 from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.motion import TraceSegment
 from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
 from smoothjog.sim.rig import LinkModel, SimRig
 from smoothjog.sim.settings import Eeprom, load_eeprom, save_eeprom
@@ -42,6 +46,10 @@ class RealtimeSim:
         """The rig time that corresponds to the loop's clock now."""
         return asyncio.get_running_loop().time() - self._t0 + self._start_rig_s
 
+    def loop_time_s(self, rig_s: float) -> float:
+        """The loop's clock (time.monotonic() on the default loop) at rig time rig_s."""
+        return rig_s - self._start_rig_s + self._t0
+
     def send(self, data: bytes) -> None:
         """Bytes from the host, sent now."""
         if not self._started:
@@ -49,6 +57,12 @@ class RealtimeSim:
         self.rig.host_send(data, max(self.now_s(), self.rig.now_s))
         if self._wake is not None:
             self._wake.set()
+
+    def catch_up(self) -> None:
+        """Run the rig up to the loop's clock now (once stopped, so the trace ends now)."""
+        if self._started:
+            for _arrival_s, line in self.rig.run_until(max(self.now_s(), self.rig.now_s)):
+                self.on_line(line)
 
     async def run(self) -> None:
         """Run forever (until cancelled), sleeping until the rig's next event or new input."""
@@ -82,6 +96,45 @@ class ServeOptions:
     pty: bool = True
     tcp_port: int | None = None
     baud: int = DEFAULT_BAUD
+    trace_path: Path | None = None
+
+
+def trace_line(seg: TraceSegment) -> str:
+    """One segment of a trace file as a JSON object on one line (floats kept exactly)."""
+    return json.dumps(
+        {
+            "t0_s": seg.t0_s,
+            "t1_s": seg.t1_s,
+            "start_mm": list(seg.start_mm),
+            "end_mm": list(seg.end_mm),
+        }
+    )
+
+
+def read_trace(path: Path) -> list[TraceSegment]:
+    """The segments of a trace file `smoothjog sim --trace` wrote; SimError in words if not one."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SimError(f"cannot read trace file {path}: {exc.strerror}") from None
+    trace: list[TraceSegment] = []
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            item = json.loads(line)
+            seg = TraceSegment(
+                float(item["t0_s"]),
+                float(item["t1_s"]),
+                tuple(float(x) for x in item["start_mm"]),
+                tuple(float(x) for x in item["end_mm"]),
+            )
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise SimError(f"{path}:{number}: not a trace segment ({exc})") from None
+        if not all(math.isfinite(t) for t in (seg.t0_s, seg.t1_s)):
+            raise SimError(f"{path}:{number}: a segment time is not a finite number")
+        trace.append(seg)
+    return trace
 
 
 def build_firmware(opts: ServeOptions) -> GrblFirmware:
@@ -138,7 +191,29 @@ class SimServer:
             runner.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await runner
+            self.sim.catch_up()
             await self._close()
+            if self.opts.trace_path is not None:
+                self.write_trace(self.opts.trace_path)
+
+    def trace(self) -> list[TraceSegment]:
+        """Every motion segment executed so far, its times on the loop's (the host's) clock."""
+        at = self.sim.loop_time_s
+        return [
+            TraceSegment(at(seg.t0_s), at(seg.t1_s), seg.start_mm, seg.end_mm)
+            for seg in self.rig.trace
+        ]
+
+    def write_trace(self, path: Path) -> None:
+        """Write trace() as JSON Lines, atomically (a reader never sees half a file)."""
+        tmp = path.with_name(path.name + ".tmp")
+        try:
+            with tmp.open("w", encoding="utf-8") as out:
+                for seg in self.trace():
+                    out.write(trace_line(seg) + "\n")
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise SimError(f"cannot write trace file {path}: {exc.strerror}") from None
 
     def summary(self) -> str:
         """What went wrong on the wire during the run, for the line printed at the end."""
