@@ -1,4 +1,4 @@
-"""`python -m bench NAME [options]`: jog fuzz micro sim cpu cncjs deadman stopat."""
+"""`python -m bench NAME [options]`: jog fuzz micro sim cpu cncjs proxy deadman stopat."""
 
 from __future__ import annotations
 
@@ -34,6 +34,10 @@ def main() -> int:
         from bench import cncjs
 
         return cncjs.main(rest)
+    if name == "proxy":
+        from bench import proxy
+
+        return proxy.main(rest)
     if name == "stopat":
         from bench import stopat
 
@@ -50,7 +54,8 @@ def main() -> int:
         code |= bench_sim_speed.main()
         return code
     print(
-        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, deadman or stopat",
+        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, proxy, deadman"
+        " or stopat",
         file=sys.stderr,
     )
     return 2

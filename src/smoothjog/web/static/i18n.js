@@ -369,10 +369,8 @@ const SERVER_ZH = [
   [/^the controller is in check mode \(\$C\): leave it before jogging$/, "控制器处于检查模式（$C）：退出后才能点动"],
   [/^the controller is running a program: jogging waits until it is idle$/, "控制器正在运行程序：空闲后才能点动"],
   [/^the controller is homing: jogging waits until it is done$/, "控制器正在回零：完成后才能点动"],
-  // Another program holds the machine: a CNCjs job (links/cncjs.py), a sender's (proxy.py).
-  [/^CNCjs is running a job: jogging waits until it ends$/, "CNCjs 正在运行任务：任务结束后才能点动"],
-  [/^a CNCjs job is paused: stop or finish it in CNCjs before jogging$/, "CNCjs 任务已暂停：请先在 CNCjs 中停止或完成该任务，再点动"],
-  [/^the sender is running a job: jogging waits until it is idle$/, "发送软件正在运行任务：空闲后才能点动"],
+  // The jog lock of `smoothjog proxy` (proxy.py JOB_LOCK): the sender's job holds the machine.
+  [/^the sender is running a job: jogging waits until it is idle$/, "发送软件正在运行作业：空闲后才能点动"],
   [/^the controller is asleep: reset it to wake it$/, "控制器处于休眠：复位以唤醒"],
   [/^the controller is in state (\w+)$/, "控制器处于 {1} 状态"],
   [/^waiting for the controller's first status report$/, "等待控制器的第一份状态报告"],
