@@ -190,7 +190,7 @@ class Run:
         assert link is not None
         return link
 
-    def kill_cncjs(self) -> None:
+    async def kill_cncjs(self) -> None:
         """SIGKILL CNCjs, as when it dies mid-jog (reaped when the run stops, not now: the
         host's loop must not wait for it)."""
         assert self.server is not None
@@ -289,14 +289,23 @@ async def drive_reversal(host: Host, ph: sc.Physics, phase_s: float) -> Marks:
 
 
 async def drive_death(
-    host: Host, ph: sc.Physics, phase_s: float, kill: Callable[[], None]
+    host: Host, ph: sc.Physics, phase_s: float, die: Callable[[], Awaitable[None]]
 ) -> Marks:
-    """S4: hold, then the client dies (kill()); the controller runs out its queue."""
+    """S4: hold, then the client dies (die()); the controller runs out its queue."""
     await _held(host, ph, phase_s)
     t_kill = host.now_s()
-    kill()
+    # What the engine had sent ahead of the machine's last reported position, as it saw it.
+    queued_mm = host.view().queued_mm
+    await die()
     await asyncio.sleep(S4_RUN_OUT_S)
-    return {"t_kill": t_kill}
+    return {"t_kill": t_kill, "queued_mm": queued_mm}
+
+
+async def smoothjog_dies(host: Host) -> None:
+    """Host.abandon(), then the link's socket or port closes, as when the process dies: lines
+    still in the link's own queue are lost, what reached CNCjs or the port runs on."""
+    host.abandon()
+    await host.link.close()
 
 
 def measure_run(scenario: str, trace: Sequence[TraceSegment], marks: Marks) -> dict[str, float]:
@@ -324,6 +333,7 @@ def measure_run(scenario: str, trace: Sequence[TraceSegment], marks: Marks) -> d
     return {
         "dist_mm": measure.distance_after(trace, t_kill),
         "time_s": max(measure.last_motion_end(trace) - t_kill, 0.0),
+        "queued_mm": marks["queued_mm"],
     }
 
 
@@ -356,7 +366,12 @@ async def play(run: Run, phase_s: float) -> Marks:
             drive = drive_reversal(host, ph, phase_s)
         else:
             drive = drive_death(
-                host, ph, phase_s, run.kill_cncjs if case.dies == CNCJS_DIES else host.abandon
+                host,
+                ph,
+                phase_s,
+                run.kill_cncjs
+                if case.dies == CNCJS_DIES
+                else functools.partial(smoothjog_dies, host),
             )
         marks = await drive
         if host.error is not None:
@@ -475,6 +490,8 @@ def cell(scenario: str, runs: Sequence[Measured], ph: sc.Physics) -> str:
             f"{_spread(values('dist_mm'), 2, unit=' mm', note=stop)} /"
             f" {_spread(values('time_s'), 3, unit=' s')}"
         )
+        if scenario == "S4":
+            text += f"; queued {_spread(values('queued_mm'), 2, unit=' mm')}"
     elif scenario == "S5":
         text = (
             f"{_spread(values('dist_mm'), 3, unit=' mm')} /"
@@ -504,7 +521,7 @@ COLUMNS = {
     "S1": "S1 release at full speed: distance (x v²/2a) / time",
     "S2": "S2 6 s hold: within 2 % / dips (mean speed)",
     "S3": "S3 reversal: time to full speed the other way",
-    "S4": "S4 client dies: distance (x v²/2a) / time",
+    "S4": "S4 client dies: distance (x v²/2a) / time; the engine's queue at the death",
     "S5": "S5 10 % release: distance / time",
 }
 
@@ -626,9 +643,12 @@ def report(
         " `smoothjog jog --cncjs URL --cncjs-port PTY`)",
         "- Host: smoothjog's Host, built as `smoothjog jog` builds it from the default"
         f" configuration (JogTuning with link margin {1000 * tuning.link_margin_s:g} ms, the"
-        " byte time from the link); S4: smoothjog dies = Host.abandon() (nothing more sent or"
-        " read; CNCjs keeps the port), CNCjs dies = SIGKILL of the CNCjs process;"
-        f" {S4_RUN_OUT_S:g} s to run out the queue",
+        " byte time from the link); S4: smoothjog dies = Host.abandon() and its link closed at"
+        " once, as a process's socket and port close when it dies (nothing more sent or read;"
+        " lines still in the link's own queue are lost; CNCjs keeps the port and writes what"
+        " it already has), CNCjs dies = SIGKILL of the CNCjs process; then"
+        f' {S4_RUN_OUT_S:g} s to run out the queue; "queued" is the distance the engine had'
+        " sent ahead of the machine's last reported position at the death, as it saw it",
         f"- Code: {code_version()}",
         "- Ground truth: every motion segment the simulator executed (`--trace`, on the"
         " monotonic clock the host runs on), measured with bench/measure.py as"

@@ -42,19 +42,27 @@ def test_the_simulator_starts_with_soft_limits_off() -> None:
 
 def test_ratios_pair_the_runs_of_one_phase() -> None:
     results = [
-        _measured("S4", cncjs.DIRECT, 0, cncjs.SMOOTHJOG_DIES, dist_mm=10.0, time_s=0.2),
-        _measured("S4", cncjs.CNCJS, 0, cncjs.SMOOTHJOG_DIES, dist_mm=11.0, time_s=0.2),
-        _measured("S4", cncjs.CNCJS, 0, cncjs.CNCJS_DIES, dist_mm=15.0, time_s=0.3),
-        _measured("S4", cncjs.DIRECT, 1, cncjs.SMOOTHJOG_DIES, dist_mm=20.0, time_s=0.2),
-        _measured("S4", cncjs.CNCJS, 1, cncjs.SMOOTHJOG_DIES, dist_mm=20.0, time_s=0.2),
-        _measured("S4", cncjs.CNCJS, 1, cncjs.CNCJS_DIES, dist_mm=30.0, time_s=0.3),
+        _measured(
+            "S4", cncjs.DIRECT, 0, cncjs.SMOOTHJOG_DIES, dist_mm=10.0, time_s=0.2, queued_mm=9.0
+        ),
+        _measured(
+            "S4", cncjs.CNCJS, 0, cncjs.SMOOTHJOG_DIES, dist_mm=11.0, time_s=0.2, queued_mm=9.0
+        ),
+        _measured("S4", cncjs.CNCJS, 0, cncjs.CNCJS_DIES, dist_mm=15.0, time_s=0.3, queued_mm=9.0),
+        _measured(
+            "S4", cncjs.DIRECT, 1, cncjs.SMOOTHJOG_DIES, dist_mm=20.0, time_s=0.2, queued_mm=9.0
+        ),
+        _measured(
+            "S4", cncjs.CNCJS, 1, cncjs.SMOOTHJOG_DIES, dist_mm=20.0, time_s=0.2, queued_mm=9.0
+        ),
+        _measured("S4", cncjs.CNCJS, 1, cncjs.CNCJS_DIES, dist_mm=30.0, time_s=0.3, queued_mm=9.0),
     ]
     assert cncjs.ratios(results, "S4", cncjs.SMOOTHJOG_DIES) == pytest.approx([1.1, 1.0])
     assert cncjs.ratios(results, "S4", cncjs.CNCJS_DIES) == pytest.approx([1.5, 1.5])
     rows = cncjs.table(results, ["S4"])
     assert len(rows) == 2 + 3  # both deaths through CNCjs get a row
-    assert "| 22.50 mm (15.00-30.00; 3.24x v²/2a) / 0.300 s |" in rows[4]
-    assert "| 15.50 mm (11.00-20.00; 2.23x v²/2a) / 0.200 s |" in rows[3]
+    assert "| 22.50 mm (15.00-30.00; 3.24x v²/2a) / 0.300 s; queued 9.00 mm |" in rows[4]
+    assert "| 15.50 mm (11.00-20.00; 2.23x v²/2a) / 0.200 s; queued 9.00 mm |" in rows[3]
 
 
 def _finite_numbers(row: str) -> list[float]:
