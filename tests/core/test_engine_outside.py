@@ -284,3 +284,58 @@ def test_a_turn_near_a_keep_out_waits_for_a_report_of_the_machine_at_the_corner(
     assert h.engine._ghost_clear(across)
     track.x_reported_mm = None  # no report of this path yet: from its start
     assert not h.engine._ghost_clear(across)
+
+
+def _suspended(h: EngineHarness, reports: int, *, reading: bool = False) -> int:
+    """Answer the engine's next `reports` queries with Jog at its estimate, at full speed, as a
+    controller in an outside hold's suspend loop does: it answers `?` and reads no line (with
+    reading, it reads and answers each line as a running jog does). Returns the replies given."""
+    replies = 0
+    seen = 0
+    while seen < reports:
+        h.advance(0.002)
+        h.poll()
+        asked = h.engine._status_asked_s
+        if asked is not None and h.t - asked >= 0.005:
+            if reading:
+                replies += len(h.ok_all())
+            h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
+            seen += 1
+    return replies
+
+
+def _start_unread_watch() -> EngineHarness:
+    h = _cruising()
+    h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))  # the report of the `?` under way
+    h.ok_all()
+    return h
+
+
+def test_a_jog_line_left_unread_across_two_reports_is_an_outside_stop() -> None:
+    # A hold that strikes a jog braking anyway (a starved queue on a slow link) shows neither
+    # a lag nor a rest short of the path; the controller answering `?` but leaving the lines it
+    # holds unread does (firmware-facts §3.7).
+    h = _start_unread_watch()
+    _suspended(h, 1)
+    assert _outside_faults(h) == []
+    _suspended(h, 1)
+    faults = _outside_faults(h)
+    assert faults and "left a jog line unread" in faults[0], h.fault_texts()
+    assert h.engine.phase is Phase.STOPPING
+
+
+def test_a_controller_reading_its_lines_is_no_outside_stop() -> None:
+    h = _start_unread_watch()
+    assert _suspended(h, 6, reading=True) > 0
+    assert h.fault_texts() == []
+    assert h.engine.phase is Phase.JOGGING
+
+
+def test_with_another_program_asking_too_one_more_report_is_needed() -> None:
+    # Its `?` may be answered in reply to ours, before our line was in: one report more.
+    h = _start_unread_watch()
+    h.ledger.record_realtime("foreign:sender", b"?")
+    _suspended(h, 2)
+    assert _outside_faults(h) == []
+    _suspended(h, 1)
+    assert _outside_faults(h), h.fault_texts()

@@ -105,6 +105,9 @@ FS_LEAD_FLOOR_MM = 0.1
 #: A stop this many steps (of the worst axis) off the path sent was not smoothjog's doing: the
 #: fuzz's worst tracked-minus-real without outside events is under one step.
 OFF_PATH_STOP_STEPS = 5.0
+#: Reports, each asked for after the one before arrived, that find the controller not reading
+#: a jog line it holds before the engine calls it an outside stop (see _lines_unread).
+UNREAD_REPORTS = 2
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
 #: Jog-line latencies the round-trip estimate looks at.
@@ -329,12 +332,15 @@ class _WheelPlan:
     clipped: bool
 
 
-@dataclass(frozen=True)
+@dataclass
 class _LineTag:
     """What the engine keeps with each of its lines in the ledger."""
 
     kind: str  # "jog", "sync"
     seg: PathSeg | None = None
+    #: By when its last byte has surely left the host: every byte counted in flight before it
+    #: (its own included) at the controller's baud rate (the link's queue drains no slower).
+    written_by_s: float = 0.0
 
 
 @dataclass
@@ -444,6 +450,11 @@ class Jogger:
         self._seen_at_speed: inc.VectorMove | None = None
         #: A report of this run showed the machine at its commanded speed, with no stall since.
         self._cruised = False
+        #: The oldest line watched for being left unread, and when the last report that asked
+        #: after it reached smoothjog, and how many did (see _lines_unread).
+        self._unread_entry: Entry | None = None
+        self._unread_seen_s = -math.inf
+        self._unread_reports = 0
         #: Pn letters seen while the machine rested (an input that reads active while Idle).
         self._rest_pins = ""
         self._pins_warned = ""
@@ -1816,6 +1827,7 @@ class Jogger:
         mpos = self.model.mpos_mm
         lead_mm = 0.0
         self._note_pins(report, now_s)
+        unread = self._lines_unread(report, asked_s, now_s)
         if mpos is not None:
             if self._last_report is not None and now_s > self._last_report[0]:
                 dt = now_s - self._last_report[0]
@@ -1829,6 +1841,8 @@ class Jogger:
             off_path = self._track.correct_estimate(mpos, (len(report.raw) + 2) * self._byte_s)
             lead_mm = self._track.x_est_mm - predicted_mm
             how = None if off_path else self._lags_outside(report, predicted_mm, asked_s, now_s)
+            if how is None and unread is not None:
+                how = unread
             if how is not None:
                 # Behind the estimate by more than the report's age explains, or at rest with
                 # path queued ahead: the machine is braking or resting although the queue runs
@@ -2029,6 +2043,53 @@ class Jogger:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
 
+    def _lines_unread(
+        self, report: StatusReport, asked_s: float | None, now_s: float
+    ) -> str | None:
+        """A sentence when the controller answers `?` in Jog but has stopped reading lines.
+
+        The engine never fills the planner (it keeps planner_reserve_blocks free), so Grbl reads
+        a `$J=` line and answers it as soon as the line is in its RX buffer. Two reports, each
+        asked for after the line surely arrived and the second after the first was received,
+        so printed after the line was in (the wire keeps order), with that line still
+        unanswered: the main loop is in its suspend loop, where an outside feed hold or jog
+        cancel keeps it until the stop is over, and then the line starts the machine again
+        (firmware-facts §3.1, §3.7). This sign needs no particular speed, position or phase of
+        the polls, so it also catches a hold that strikes a jog already braking, where neither
+        a lag nor a rest short of the path shows. Another program's `?` may answer ours
+        early (a relay, a proxied sender): then a third report is asked for.
+        """
+        oldest = self.ledger.oldest()
+        watching = self.phase is Phase.JOGGING or (
+            self.phase is Phase.STOPPING
+            and self._stop.phase is StopPhase.WAIT_ACKS
+            and not self._stop.cancelled
+        )
+        if (
+            oldest is None
+            or oldest.owner != ENGINE
+            or _kind(oldest) != "jog"
+            or not oldest.on_wire
+            or not watching
+        ):
+            self._unread_entry = None
+            return None
+        if oldest is not self._unread_entry:
+            self._unread_entry = oldest
+            self._unread_reports = 0
+            tag = oldest.tag
+            assert isinstance(tag, _LineTag)
+            self._unread_seen_s = tag.written_by_s if oldest.echo_s is None else oldest.echo_s
+        if asked_s is None or asked_s <= self._unread_seen_s:
+            return None
+        self._unread_reports += 1
+        self._unread_seen_s = now_s
+        others = self.ledger.relayed or self.ledger.stats.queries_by_others > 0
+        if report.state != "Jog" or self._unread_reports < UNREAD_REPORTS + others:
+            return None
+        waited_ms = (now_s - oldest.sent_s) * 1000.0
+        return f"the controller left a jog line unread for {waited_ms:.0f} ms while answering `?`"
+
     def _acked_end_mm(self) -> float | None:
         """Where along the path the acknowledged jogs end (replies come in order, so they are
         a prefix of the path), or None before the first ok."""
@@ -2161,7 +2222,10 @@ class Jogger:
         self, line: str, kind: str, now_s: float, out: list[Output], seg: PathSeg | None = None
     ) -> None:
         """Send a line and remember it until its ok/error."""
-        self._pending.append(self.ledger.record_line(ENGINE, line, now_s, _LineTag(kind, seg)))
+        tag = _LineTag(kind, seg)
+        entry = self.ledger.record_line(ENGINE, line, now_s, tag)
+        tag.written_by_s = now_s + self.ledger.in_flight_bytes * self._byte_s
+        self._pending.append(entry)
         self.stats.lines_sent += 1
         if kind == "jog":
             self.stats.jogs_sent += 1

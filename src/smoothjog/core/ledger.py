@@ -63,6 +63,8 @@ class Entry:
     tag: object = None
     #: False while a relayed line waits for the relay's echo (it may not be on the wire yet).
     on_wire: bool = True
+    #: When the relay echoed it (relayed lines only): it went on the wire then.
+    echo_s: float | None = None
 
 
 @dataclass
@@ -72,6 +74,9 @@ class LedgerStats:
     lines: collections.Counter[str] = field(default_factory=collections.Counter)
     realtime: collections.Counter[str] = field(default_factory=collections.Counter)
     replies: collections.Counter[str] = field(default_factory=collections.Counter)
+    #: `?` bytes sent by owners other than the engine and the handshake (a proxied sender, a
+    #: user's console): their reports reach every owner, so the engine may take one for its own.
+    queries_by_others: int = 0
     #: Replies that arrived with no line waiting: another writer bypassing the ledger, or a
     #: reply to a line sent before the controller reset.
     unowned_replies: int = 0
@@ -169,6 +174,7 @@ class Ledger:
             self._unechoed -= skipped + 1
             self.stats.unechoed_dropped += skipped
             entry.on_wire = True
+            entry.echo_s = now_s
             return entry
         entry = Entry(foreign_owner, text, line_cost_bytes(text), now_s)
         self._entries.insert(first, entry)
@@ -179,6 +185,8 @@ class Ledger:
     def record_realtime(self, owner: str, byte: bytes) -> None:
         """Note a realtime byte sent by owner: it takes no room in the RX buffer."""
         self.stats.realtime[owner] += 1
+        if byte == b"?" and owner not in (ENGINE, HANDSHAKE):
+            self.stats.queries_by_others += 1
 
     def on_reply(self) -> Entry | None:
         """An `ok`/`error` arrived: release and return the oldest unanswered line, if any."""
