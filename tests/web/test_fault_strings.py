@@ -469,7 +469,11 @@ def _outside_hows() -> list[str]:
         and _callee(node) == "_outside_stop"
         and isinstance(node.args[2], ast.Constant)
     ]
-    return [*said, *method_returns("core/jogger.py", "_lags_outside")]
+    return [
+        *said,
+        *method_returns("core/jogger.py", "_lags_outside"),
+        *method_returns("core/jogger.py", "_lines_unread"),
+    ]
 
 
 def _room_stoppers() -> list[str]:
@@ -573,6 +577,7 @@ SAMPLES: dict[str, Any] = {
     "jogger.err_mm": [0.4, 12.25],
     "jogger.rest_ahead_mm": [0.42],
     "jogger.lag_mm": [1.5],
+    "jogger.unread_ms": [102.4, 1500.0],
     "jogger.pressed": _pin_names,
     "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool"],
     "jogger._outside_stop.how": _outside_hows,

@@ -2057,7 +2057,8 @@ class Jogger:
         (firmware-facts §3.1, §3.7). This sign needs no particular speed, position or phase of
         the polls, so it also catches a hold that strikes a jog already braking, where neither
         a lag nor a rest short of the path shows. Another program's `?` may answer ours
-        early (a relay, a proxied sender): then a third report is asked for.
+        early (a relay, a proxied sender): then a third report is asked for. The last report
+        must show the jog braking or at rest (a full planner runs on at speed).
         """
         oldest = self.ledger.oldest()
         watching = self.phase is Phase.JOGGING or (
@@ -2087,8 +2088,20 @@ class Jogger:
         others = self.ledger.relayed or self.ledger.stats.queries_by_others > 0
         if report.state != "Jog" or self._unread_reports < UNREAD_REPORTS + others:
             return None
-        waited_ms = (now_s - oldest.sent_s) * 1000.0
-        return f"the controller left a jog line unread for {waited_ms:.0f} ms while answering `?`"
+        # A planner filled after all (the blocks of a turn from a fast move to a slow one are
+        # counted out by the estimate before the machine has run them) leaves a line unread
+        # too, with the machine running on at its speed: only a jog braking or at rest below
+        # the speed it was sent, away from a junction it may rest at, is judged.
+        feed = report.feed
+        cmd_mm_min = mm_s_to_mm_min(self._commanded.speed_mm_s)
+        if (
+            self._jog_unbraked
+            or (feed is not None and feed >= 0.95 * cmd_mm_min)
+            or self._near_a_junction_at_rest()
+        ):
+            return None
+        unread_ms = (now_s - oldest.sent_s) * 1000.0
+        return f"the controller left a jog line unread for {unread_ms:.0f} ms while answering `?`"
 
     def _acked_end_mm(self) -> float | None:
         """Where along the path the acknowledged jogs end (replies come in order, so they are

@@ -416,6 +416,7 @@ const SERVER_ZH = [
   [/^it fell (\d+\.\d+) mm behind the path it was sent$/, "机器落后所发路径 {1} mm"],
   [/^it left the path smoothjog sent$/, "机器偏离了 smoothjog 所发的路径"],
   [/^it came to rest short of the path's end$/, "机器未到路径终点就停下了"],
+  [/^the controller left a jog line unread for (\d+) ms while answering `\?`$/, "控制器仍在回应 `?`，却有一条点动指令 {1} ms 未被读取"],
   [/^the controller's (feed-hold|door) input$/, "控制器的{1}输入"],
   [/^a feed hold or jog cancel from outside smoothjog \(a button, another program\)$/, "来自 smoothjog 以外的进给保持或点动取消（按钮或其他程序）"],
   [/^release the stick \(or key\) and press it again to jog on$/, "请松开摇杆（或按键），再按下即可继续点动"],
