@@ -362,3 +362,55 @@ def test_with_another_program_asking_too_one_more_report_is_needed() -> None:
     assert _outside_faults(h) == []
     _suspended(h, 1, from_feed_mm_min=0.6 * FEED_MM_MIN)
     assert _outside_faults(h), h.fault_texts()
+
+
+SLOW = ContinuousIntent({"X": -1.0}, 0.05)  # 250 mm/min on the hobby router's X
+
+
+def _slow_run_dry(short_mm: float) -> EngineHarness:
+    """A slow held jog seen at speed whose report shows FS:0 short_mm before the end of the
+    acknowledged lines, the rest of them still unanswered (a Wi-Fi stall holds their oks)."""
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(SLOW)
+    h.run(1.0)
+    h.status("Jog", _estimate_mm(h), fs=(SLOW.speed * FEED_MM_MIN, 0))
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002, ack=False)
+    h.advance(0.003)
+    track = h.engine._track
+    acked = [seg for seg in track.path if seg.acked]
+    end_mm = acked[-1].x0_mm + acked[-1].length_mm
+    h.status("Jog", track.point_at(end_mm - short_mm), fs=(0, 0))
+    return h
+
+
+def test_a_slow_jog_resting_within_its_committed_segments_of_the_end_is_no_outside_stop() -> None:
+    # At 250 mm/min the firmware's committed segments run at speed until the last moment:
+    # they cover v x twice the committed time (about 0.26 mm), not just the braking.
+    h = _slow_run_dry(0.2)
+    assert _outside_faults(h) == []
+
+
+def test_a_slow_jog_resting_well_short_of_the_end_is_an_outside_stop() -> None:
+    h = _slow_run_dry(0.6)
+    assert _outside_faults(h), h.fault_texts()
+
+
+def test_a_rest_braking_into_a_reversal_from_a_faster_block_is_near_the_junction() -> None:
+    # A Y- step at 25 mm/s with a slow Y+ jog queued behind it: the machine brakes into the
+    # reversal from the step's speed, and FluidNC was seen at FS:0 0.41 mm before it (its
+    # last segments still running). That is within the step's reach, not the slow jog's.
+    from smoothjog.core.tracker import PathSeg
+
+    h = EngineHarness()
+    track = h.engine._track
+    track.begin((0.0, 0.0, 0.0), 0.0)
+    track.append(PathSeg((0.0, 0.0, 0.0), (0.0, -2.764, 0.0), 2.764, 25.0, 500.0, 0.0))
+    back = PathSeg((0.0, -2.764, 0.0), (0.0, -2.624, 0.0), 0.14, 7.5, 500.0, 2.764)
+    track.append(back)
+    assert back.entry_cap_mm_s == 0.0  # a reversal: the planner passes it at rest
+    track.x_est_mm = 2.764 - 0.41
+    assert h.engine._near_a_junction_at_rest()
+    track.x_est_mm = 2.764 - 1.4  # beyond the step's own reach (25²/500 = 1.25 mm)
+    assert not h.engine._near_a_junction_at_rest()
