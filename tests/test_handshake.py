@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+
 import pytest
 
 from smoothjog.core.errors import ConnectError, LinkError
@@ -230,3 +232,13 @@ def test_summary_contents(lines: list[str], expected: list[str]) -> None:
     summary = format_summary(_model(*lines))
     for text in expected:
         assert text in summary, f"{text!r} not in\n{summary}"
+
+
+async def test_a_held_controller_is_named_long_before_the_timeout() -> None:
+    """A query unanswered for STATUS_CHECK_S asks `?` once: a Hold:0 is said then, not after
+    the whole timeout (a `!` just after a reset left the re-handshake waiting 5 s)."""
+    with TcpPeer(ScriptedGrbl(state="Hold:0")) as peer:
+        async with TcpLink(peer.host, peer.port) as link:
+            with pytest.raises(ConnectError) as info:
+                await asyncio.wait_for(handshake(link, timeout_s=60.0), 20.0)
+    assert "reports Hold:0 and reads no line in that state" in str(info.value)

@@ -158,11 +158,25 @@ class Querier:
         """Read until the reply that ends this query."""
         loop = asyncio.get_running_loop()
         deadline_s = loop.time() + self.timeout_s
+        # A query still unanswered after STATUS_CHECK_S asks `?` once: a controller someone
+        # put in a feed hold (a `!` just after a reset) answers that and reads no line, and the
+        # user hears it now rather than at the end of the timeout.
+        check_s: float | None = loop.time() + min(STATUS_CHECK_S, self.timeout_s)
         responses: list[Response] = []
         content = False
         stale_ok = False
         while True:
-            response = await self._next(deadline_s)
+            response = await self._next(deadline_s if check_s is None else check_s)
+            if response is None and check_s is not None and loop.time() < deadline_s:
+                check_s = None
+                self.link.send_realtime(STATUS_QUERY)
+                continue
+            if (
+                isinstance(response, StatusReport)
+                and check_s is None
+                and response.state in SUSPENDED_STATES
+            ):
+                raise self._suspended(response)
             if response is None:
                 if stale_ok:
                     # Only bare oks came: a firmware that answers this query with nothing.
@@ -216,14 +230,18 @@ class Querier:
         except (TimeoutError, ControllerResetError):
             status = None
         if status is not None and status.state in SUSPENDED_STATES:
-            # A feed hold (someone's `!` or a hold button), an open door or sleep: Grbl's main
-            # loop reads no line until it is resumed (firmware-facts §3.2, §3.3).
-            shown = status.state if status.substate is None else f"{status.state}:{status.substate}"
-            return ConnectError(
-                f"{self.link.describe()} reports {shown} and reads no line in that state:"
-                " resume it (cycle start, ~) or reset it, then connect again"
-            )
+            return self._suspended(status)
         return self._no_answer(line)
+
+    def _suspended(self, status: StatusReport) -> ConnectError:
+        """The error for a controller in a state where it reads no line."""
+        # A feed hold (someone's `!` or a hold button), an open door or sleep: Grbl's main loop
+        # reads no line until it is resumed (firmware-facts §3.2, §3.3).
+        shown = status.state if status.substate is None else f"{status.state}:{status.substate}"
+        return ConnectError(
+            f"{self.link.describe()} reports {shown} and reads no line in that state:"
+            " resume it (cycle start, ~) or reset it, then connect again"
+        )
 
     def _no_answer(self, line: str) -> ConnectError:
         """The error for a query that got no reply in time."""
