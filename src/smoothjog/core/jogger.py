@@ -1977,20 +1977,23 @@ class Jogger:
             # the segments being prepared, which reaches 0 while the committed ones still
             # run: a queue braking for its end (an edge, a keep-out) may still be short of
             # it by what they cover over a lead of twice the committed time (the segment
-            # buffer's lead varies by firmware). That is the last t of a braking from the
-            # speed jogged: ½·a·t² when the braking lasts t or longer, and otherwise v·t less
-            # the braking's v²/2a, since a slow jog runs at its speed until it brakes (Grbl
-            # over a stalled Wi-Fi link rested 0.15 mm short at 250 mm/min as its queue ran
-            # dry); at least 0.1 mm (FluidNC's slow jogs were seen resting 0.08 mm short at
-            # FS:0 with no outside stop).
+            # buffer's lead varies by firmware): at most ½·a·t² at the end of a braking and
+            # never more than the whole stop from the speed jogged; at least 0.1 mm
+            # (FluidNC's slow jogs were seen resting 0.08 mm short at FS:0 with no outside
+            # stop). A slow jog's committed segments run at speed until it brakes and may
+            # cover more (Grbl over a stalled Wi-Fi link rested 0.15 mm short at 250 mm/min
+            # as its queue ran dry: a false alarm), but allowing v·t there hides a real 0x85
+            # of a jog at 500 mm/min, which rests only a few tenths short.
             rest_ahead_mm = acked_end_mm - self._track.x_est_mm
             v_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
             lead_s = 2.0 * self.tuning.committed_s
-            if v_mm_s >= move.accel_mm_s2 * lead_s:
-                committed_mm = 0.5 * move.accel_mm_s2 * lead_s**2
-            else:
-                committed_mm = v_mm_s * lead_s - inc.stop_distance_mm(v_mm_s, move.accel_mm_s2)
-            committed_mm = max(committed_mm, FS_LEAD_FLOOR_MM)
+            committed_mm = max(
+                min(
+                    0.5 * move.accel_mm_s2 * lead_s**2,
+                    inc.stop_distance_mm(v_mm_s, move.accel_mm_s2),
+                ),
+                FS_LEAD_FLOOR_MM,
+            )
             if (
                 rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
                 and not self._near_a_junction_at_rest()
