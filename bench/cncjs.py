@@ -53,7 +53,7 @@ from pathlib import Path
 
 from bench import cncjs_rig, measure
 from bench import scenarios as sc
-from bench.cncjs_rig import CncjsServer, RigError, SimProcess
+from bench.cncjs_rig import CncjsServer, RigError, SimProcess, write_report
 from bench.cpu import _sigterm_as_interrupt
 from bench.links import cli_tuning, code_version
 from smoothjog.cli.common import link_for
@@ -741,8 +741,5 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     load = (load_before, os.getloadavg())
     text = report(argv, args, results, load, time.monotonic() - started)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "cncjs.md").write_text("\n".join(text) + "\n", encoding="utf-8")
-    print("\n".join(text))
+    write_report(args.out, "cncjs.md", text)
     return 0

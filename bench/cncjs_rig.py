@@ -94,6 +94,14 @@ def free_port() -> int:
         return port
 
 
+def write_report(out_dir: str | Path, name: str, text: list[str]) -> None:
+    """Write a bench's report lines to out_dir/name (made if missing) and print them."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text("\n".join(text) + "\n", encoding="utf-8")
+    print("\n".join(text))
+
+
 def log_tail(path: Path, chars: int = LOG_TAIL_CHARS) -> str:
     """The end of a log file without its colour codes, for error messages."""
     try:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import serial
 
-from bench.cncjs_rig import ROOT, RigError, SimProcess, log_tail, stop_process
+from bench.cncjs_rig import ROOT, RigError, SimProcess, log_tail, stop_process, write_report
 from bench.cpu import _sigterm_as_interrupt
 from bench.links import code_version
 
@@ -341,8 +341,5 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     load = (load_before, os.getloadavg())
     text = report(argv, args, results, load, time.monotonic() - started)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "proxy.md").write_text("\n".join(text) + "\n", encoding="utf-8")
-    print("\n".join(text))
+    write_report(args.out, "proxy.md", text)
     return 0
