@@ -16,6 +16,7 @@ handshake's state in stopper.py.
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 from collections import deque
@@ -274,6 +275,30 @@ class Phase(Enum):
     SETTLING = "settling"  # waiting for the machine to report rest after the queue ran out
 
 
+class _Window:
+    """The last `size` values, also kept in order so a percentile is one index away.
+
+    Every reply and every late wake-up takes a percentile of such a window: keeping it sorted as
+    values come and go costs less than sorting it again each time.
+    """
+
+    __slots__ = ("_recent", "ranked")
+
+    def __init__(self, size: int) -> None:
+        self._recent: deque[float] = deque(maxlen=size)
+        #: The same values as the window, in increasing order.
+        self.ranked: list[float] = []
+
+    def add(self, value: float) -> None:
+        """Take value in, dropping the oldest once the window is full."""
+        recent = self._recent
+        ranked = self.ranked
+        if len(recent) == recent.maxlen:
+            del ranked[bisect.bisect_left(ranked, recent[0])]
+        recent.append(value)
+        bisect.insort(ranked, value)
+
+
 @dataclass(eq=False)
 class _Cruise:
     """One increment repeated while a held jog cruises, and how far its ray is clear."""
@@ -443,9 +468,9 @@ class Jogger:
         self._last_reply_s = -math.inf
         self._prev_sent_s = -math.inf
         #: How late the host woke the engine for its planned top-ups (90th percentile).
-        self._late_s: deque[float] = deque(maxlen=RTT_WINDOW)
+        self._late_s = _Window(RTT_WINDOW)
         self._lateness_s = 0.0
-        self._services: deque[float] = deque(maxlen=RTT_WINDOW)
+        self._services = _Window(RTT_WINDOW)
         #: The commanded move a Jog report last showed running at its speed.
         self._seen_at_speed: inc.VectorMove | None = None
         #: A report of this run showed the machine at its commanded speed, with no stall since.
@@ -487,7 +512,7 @@ class Jogger:
         self._fresh_status_wanted = False
         self._last_status_sent_s = -math.inf
         self._rtt_s = 0.003  # time for a jog line to be planned: a low percentile of its ok latency
-        self._rtts: deque[float] = deque(maxlen=RTT_WINDOW)
+        self._rtts = _Window(RTT_WINDOW)
         self._rtt_hi_s = self._rtt_s  # what the queue and the lines in flight are sized for
         #: Decreasing latencies of the last RTT_MEMORY_S (a sliding maximum), oldest first.
         self._rtt_peaks: deque[tuple[float, float]] = deque()
@@ -807,8 +832,8 @@ class Jogger:
         if self._wake_at_s is not None and now_s > self._wake_at_s:
             # Woken late for a planned top-up (a busy host, a slow timer): the queue drained
             # that much further, so it is sized for the late end of such wake-ups as well.
-            self._late_s.append(now_s - self._wake_at_s)
-            ranked = sorted(self._late_s)
+            self._late_s.add(now_s - self._wake_at_s)
+            ranked = self._late_s.ranked
             self._lateness_s = ranked[(9 * len(ranked)) // 10]
         self._changed = False
         self._wake_at_s = None
@@ -1757,8 +1782,8 @@ class Jogger:
                 # only once a report shows it at speed again.
                 self._seen_at_speed = None
                 self._cruised = False
-            self._rtts.append(latency_s)
-            ranked = sorted(self._rtts)
+            self._rtts.add(latency_s)
+            ranked = self._rtts.ranked
             self._rtt_s = ranked[(3 * len(ranked)) // 4]
             # The queue must bridge the slow end of the round trips the link shows (its jitter,
             # firmware-facts §6), not a typical one: the 90th percentile of the last
@@ -1767,7 +1792,7 @@ class Jogger:
             # (The others of a burst wait behind it in the parser, one after another: they are
             # not late, and counting them would size every queue for the start of a jog.)
             if entry.sent_s != self._prev_sent_s:
-                self._services.append(latency_s)
+                self._services.add(latency_s)
                 # A stall (a Wi-Fi link pausing every few seconds) is remembered for
                 # RTT_MEMORY_S: the window alone would forget it between two stalls.
                 peaks = self._rtt_peaks
@@ -1778,7 +1803,7 @@ class Jogger:
             peaks = self._rtt_peaks
             while peaks and peaks[0][0] < now_s - RTT_MEMORY_S:
                 peaks.popleft()
-            ranked_s = sorted(self._services) or [latency_s]
+            ranked_s = self._services.ranked or [latency_s]
             window_s = ranked_s[(9 * len(ranked_s)) // 10]
             # The longest of the memory counts only when it stands out from the window (a
             # stall), so one slow reply does not lengthen the queue for half a minute.

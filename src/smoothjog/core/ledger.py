@@ -43,7 +43,9 @@ class LedgerError(CoreError):
 
 def line_cost_bytes(text: str) -> int:
     """RX-buffer bytes a line takes: its ASCII bytes plus the single `\\n` the link appends."""
-    return len(text.encode("ascii", errors="replace")) + 1
+    # Encoded as ASCII with errors="replace", every character is one byte (a `?` for those
+    # outside ASCII), so the length is the text's own: no need to encode it at every check.
+    return len(text) + 1
 
 
 def foreign(name: str) -> str:

@@ -403,7 +403,9 @@ class MachineModel:
         # too, so the two cannot be told apart and this says False rather than cry wolf.
         if not self.settings.soft_limits or self.homing_force_set_origin:
             return False
-        return self.mpos_mm is not None and all(c == 0.0 for c in self.mpos_mm)
+        mpos = self.mpos_mm
+        # count(), not a generator: the engine asks before every line it sends.
+        return mpos is not None and mpos.count(0.0) == len(mpos)
 
     def keep_out_at(self, point_mm: Sequence[float]) -> KeepOut | None:
         """The first keep-out zone containing the point, if any."""

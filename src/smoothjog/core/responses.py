@@ -28,6 +28,8 @@ KNOWN_STATES: frozenset[str] = frozenset(
 # "1_0", none of which a controller sends, so a stricter pattern keeps garbage out.
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
 _INT = re.compile(r"[+-]?\d+")
+#: A control byte (below 0x20, or DEL) anywhere in a line: line noise, never a controller's text.
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 _MAX_AXES = 9  # X Y Z A B C U V W, FluidNC's maximum (firmware-facts §7)
 
 
@@ -272,10 +274,11 @@ def _parse_text(text: str) -> Response:
     """Dispatch a decoded line without its line end on its first characters."""
     if text == "":
         return Empty()
-    bad = next((c for c in text if ord(c) < 0x20 or ord(c) == 0x7F), None)
+    # One regex scan, not a Python loop over the characters: this runs for every line received.
+    bad = _CONTROL.search(text)
     if bad is not None:
         # A controller never prints control bytes inside a line: this is line noise.
-        raise _MalformedLineError(f"control byte 0x{ord(bad):02x} inside the line")
+        raise _MalformedLineError(f"control byte 0x{ord(bad.group()):02x} inside the line")
     if text == "ok":
         return Ok()
     if text.startswith("error:"):

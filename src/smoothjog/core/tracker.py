@@ -8,9 +8,11 @@ report. Distances along the path are `x_mm`, from the start of the first jog sen
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
+import operator
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from smoothjog.core import increments as inc
 from smoothjog.core.units import Vec, norm, unit
@@ -20,6 +22,10 @@ PATH_KEEP_MM = 20.0
 #: At most this many jogs are remembered (a slow jog makes many short ones); far more than
 #: the planner can hold, so every jog not yet run is always kept.
 PATH_KEEP_SEGMENTS = 96
+
+
+#: The key seg_index_at bisects the path by (a C getter: it runs several times every poll).
+_X0 = operator.attrgetter("x0_mm")
 
 
 @dataclass
@@ -36,6 +42,15 @@ class PathSeg:
     entry_cap_mm_s: float = 0.0  # fastest the planner lets the machine enter it (junction)
     #: Its direction, when the sender already knows it (else worked out from start and end).
     unit_vec: Vec | None = None
+    #: Where it ends along the path (x0_mm + length_mm), and how long it runs at its speed (0
+    #: without one): worked out once, since the queue is scanned several times every poll.
+    x1_mm: float = field(init=False, repr=False, compare=False)
+    run_s: float = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        """Work out x1_mm and run_s (the fields above are never changed after this)."""
+        self.x1_mm = self.x0_mm + self.length_mm
+        self.run_s = self.length_mm / self.speed_mm_s if self.speed_mm_s > 0.0 else 0.0
 
 
 class PathTracker:
@@ -123,8 +138,7 @@ class PathTracker:
         """Distance along the path to the end of the last jog sent."""
         if not self.path:
             return 0.0
-        last = self.path[-1]
-        return last.x0_mm + last.length_mm
+        return self.path[-1].x1_mm
 
     def queued_mm(self) -> float:
         """Path still ahead of the estimate."""
@@ -135,7 +149,7 @@ class PathTracker:
         committed_end = self.x_est_mm + self.v_est_mm_s * self.committed_s
         count = 0
         for seg in reversed(self.path):  # queued jogs are at the end; stop at the first done
-            if seg.x0_mm + seg.length_mm <= committed_end:
+            if seg.x1_mm <= committed_end:
                 break
             count += 1
         return count
@@ -148,7 +162,7 @@ class PathTracker:
         committed_end = self.x_est_mm + self.v_est_mm_s * self.committed_s
         oldest_end: float | None = None
         for seg in reversed(self.path):
-            end = seg.x0_mm + seg.length_mm
+            end = seg.x1_mm
             if end <= committed_end:
                 break
             oldest_end = end
@@ -157,11 +171,13 @@ class PathTracker:
     def longest_queued_s(self, block_s: float) -> float:
         """Duration of the longest jog not yet finished, or block_s if that is longer."""
         longest_s = block_s
+        x_est_mm = self.x_est_mm
         for seg in reversed(self.path):  # the queued jogs are at the end of the path
-            if seg.x0_mm + seg.length_mm <= self.x_est_mm:
+            if seg.x1_mm <= x_est_mm:
                 break
-            if seg.speed_mm_s > 0.0:
-                longest_s = max(longest_s, seg.length_mm / seg.speed_mm_s)
+            # A comparison, not max(): this runs over the queue at every poll.
+            if seg.speed_mm_s > 0.0 and seg.run_s > longest_s:
+                longest_s = seg.run_s
         return longest_s
 
     def prune(self, report_age_s: float = 0.3) -> None:
@@ -177,23 +193,25 @@ class PathTracker:
         speed_mm_s = max(self.v_est_mm_s, self.path[-1].speed_mm_s) if self.path else 0.0
         recent_from = self.x_est_mm - (1.0 + speed_mm_s * report_age_s)
         keep_from = min(self.x_est_mm - PATH_KEEP_MM, recent_from)
+        path = self.path
+        n_segs = len(path)
         drop = 0
-        while drop < len(self.path) - 1 and (
-            self.path[drop].x0_mm + self.path[drop].length_mm < keep_from
-            or (
-                len(self.path) - drop > PATH_KEEP_SEGMENTS
-                and self.path[drop].x0_mm + self.path[drop].length_mm < recent_from
-            )
-        ):
+        while drop < n_segs - 1:
+            seg = path[drop]
+            end_mm = seg.x1_mm
+            if not (
+                end_mm < keep_from or (n_segs - drop > PATH_KEEP_SEGMENTS and end_mm < recent_from)
+            ):
+                break
             drop += 1
         if drop:
-            del self.path[:drop]
+            del path[:drop]
 
     def seg_index_at(self, x_mm: float) -> int | None:
         """Index of the path segment containing x_mm (bisect: the path is sorted by x0)."""
         path = self.path
-        i = bisect.bisect_right(path, x_mm, key=lambda seg: seg.x0_mm) - 1
-        if 0 <= i < len(path) and x_mm < path[i].x0_mm + path[i].length_mm:
+        i = bisect.bisect_right(path, x_mm, key=_X0) - 1
+        if 0 <= i < len(path) and x_mm < path[i].x1_mm:
             return i
         return None
 
@@ -240,7 +258,7 @@ class PathTracker:
             if ahead > reach_mm:
                 break
             cap = min(cap, math.sqrt(nxt.entry_cap_mm_s**2 + 2.0 * a * max(ahead, 0.0)))
-        end_x = path[-1].x0_mm + path[-1].length_mm
+        end_x = path[-1].x1_mm
         return min(cap, math.sqrt(2.0 * a * max(end_x - x, 0.0)))
 
     # ----------------------------------------------------------------- the estimate
@@ -262,8 +280,10 @@ class PathTracker:
             # Hot path (every poll of a held jog): at full speed with nothing to brake for in
             # this window, each step below would keep v and add v*h; do just that.
             step_mm = self.v_est_mm_s * h
+            x_mm = self.x_est_mm
             for _ in range(steps):
-                self.x_est_mm += step_mm
+                x_mm += step_mm  # the same sums, one by one, as the loop below would make
+            self.x_est_mm = x_mm
             return
         for _ in range(steps):
             index = self.seg_index_at(self.x_est_mm)
@@ -296,16 +316,20 @@ class PathTracker:
         v_sq = v * v
         if 2.0 * a * (end_x - x_end) < v_sq:
             return False  # braking for the end of the queue may start inside the window
-        reach_mm = v_sq / (2.0 * a)
-        for nxt in path[index + 1 :]:
-            if nxt.x0_mm - x_end > reach_mm:
+        two_a = 2.0 * a
+        reach_mm = v_sq / two_a
+        # islice, not a slice: the loop mostly ends at the first block beyond reach (every
+        # poll of a held jog comes here), so copying the rest of the path would be wasted.
+        for nxt in itertools.islice(path, index + 1, None):
+            ahead = nxt.x0_mm - x_end
+            if ahead > reach_mm:
                 break
             if nxt.accel_mm_s2 != a:
                 return False
             if nxt.x0_mm <= x_end and nxt.speed_mm_s != v:
                 return False  # the window enters a block of another speed
-            ahead = max(nxt.x0_mm - x_end, 0.0)
-            if nxt.entry_cap_mm_s**2 + 2.0 * a * ahead < v_sq:
+            ahead = max(ahead, 0.0)
+            if nxt.entry_cap_mm_s**2 + two_a * ahead < v_sq:
                 return False  # a junction ahead needs braking inside the window
         return True
 
