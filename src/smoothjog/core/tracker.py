@@ -46,6 +46,9 @@ class PathSeg:
     #: without one): worked out once, since the queue is scanned several times every poll.
     x1_mm: float = field(init=False, repr=False, compare=False)
     run_s: float = field(init=False, repr=False, compare=False)
+    #: How many jogs in a row, ending with this one, enter at their own speed with the same
+    #: speed and acceleration as this one (0 if this one enters slower): see _streak.
+    streak: int = field(default=0, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         """Work out x1_mm and run_s (the fields above are never changed after this)."""
@@ -119,6 +122,7 @@ class PathTracker:
                 seg.entry_cap_mm_s = min(
                     seg.speed_mm_s, prev.speed_mm_s, self.junction_speed_mm_s(prev, seg)
                 )
+        seg.streak = _streak(self.path[-1] if self.path else None, seg)
         self.path.append(seg)
         self.end_mm = seg.end_mm
 
@@ -126,6 +130,11 @@ class PathTracker:
         """Take out a jog the controller rejected."""
         if seg in self.path:
             self.path.remove(seg)
+            # The streaks after it counted it: count them again along what is left.
+            prev: PathSeg | None = None
+            for kept in self.path:
+                kept.streak = _streak(prev, kept)
+                prev = kept
 
     def ack(self, seg: PathSeg, now_s: float) -> None:
         """The controller planned this jog; the first ok starts the estimate."""
@@ -317,6 +326,18 @@ class PathTracker:
         if 2.0 * a * (end_x - x_end) < v_sq:
             return False  # braking for the end of the queue may start inside the window
         two_a = 2.0 * a
+        last = path[-1]
+        if (
+            a > 0.0
+            and last.streak >= len(path) - index - 1
+            and last.speed_mm_s == v
+            and last.accel_mm_s2 == a
+            and v**2 >= v_sq
+        ):
+            # Hot path: every jog after this one enters at v with acceleration a (a held jog's
+            # repeated increments), so each passes the loop's checks below: the same accel and
+            # speed, and entry_cap**2 (which is v**2) + 2a * ahead never below v * v.
+            return True
         reach_mm = v_sq / two_a
         # islice, not a slice: the loop mostly ends at the first block beyond reach (every
         # poll of a held jog comes here), so copying the rest of the path would be wasted.
@@ -417,6 +438,21 @@ class PathTracker:
     def steps_from(self, a: Sequence[float], b: Sequence[float]) -> float:
         """Distance between two positions in steps of the worst axis."""
         return max(abs(x - y) * spm for x, y, spm in zip(a, b, self.steps_per_mm, strict=True))
+
+
+def _streak(prev: PathSeg | None, seg: PathSeg) -> int:
+    """seg's streak after prev: 0 if it enters slower than its speed, one more than prev's if
+    prev is of the streak and of the same speed and acceleration, else 1."""
+    if seg.entry_cap_mm_s != seg.speed_mm_s:
+        return 0
+    if (
+        prev is not None
+        and prev.streak
+        and prev.speed_mm_s == seg.speed_mm_s
+        and prev.accel_mm_s2 == seg.accel_mm_s2
+    ):
+        return prev.streak + 1
+    return 1
 
 
 def _outside_box(p: Vec, a: Vec, b: Vec, margin_mm: float) -> bool:
