@@ -41,7 +41,7 @@ from smoothjog.core.intents import (
     validate_intent,
 )
 from smoothjog.core.jogline import MM_DECIMALS, build_jog_line, format_number
-from smoothjog.core.ledger import ENGINE, Entry, Ledger
+from smoothjog.core.ledger import ENGINE, Entry, Ledger, line_cost_bytes
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import (
@@ -357,7 +357,7 @@ class _WheelPlan:
     clipped: bool
 
 
-@dataclass
+@dataclass(frozen=True)
 class _LineTag:
     """What the engine keeps with each of its lines in the ledger."""
 
@@ -1973,14 +1973,7 @@ class Jogger:
         what the report's age can explain (it may have been built any time since its `?`).
         """
         move = self._commanded
-        # While smoothjog's own stop waits for the oks before its 0x85, the queue still runs as
-        # sent: someone else's stop then shows just as it does while jogging.
-        own_stop_uncancelled = (
-            self.phase is Phase.STOPPING
-            and self._stop.phase is StopPhase.WAIT_ACKS
-            and not self._stop.cancelled
-        )
-        if report.state != "Jog" or not (self.phase is Phase.JOGGING or own_stop_uncancelled):
+        if report.state != "Jog" or not self._queue_runs_as_sent():
             self._seen_at_speed = None
             self._cruised = False
             return None
@@ -2071,6 +2064,16 @@ class Jogger:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
 
+    def _queue_runs_as_sent(self) -> bool:
+        """True while jogging, and while smoothjog's own stop still waits for the oks before its
+        0x85: the queue then runs as sent, so someone else's stop shows as it does while
+        jogging."""
+        return self.phase is Phase.JOGGING or (
+            self.phase is Phase.STOPPING
+            and self._stop.phase is StopPhase.WAIT_ACKS
+            and not self._stop.cancelled
+        )
+
     def _lines_unread(
         self, report: StatusReport, asked_s: float | None, now_s: float
     ) -> str | None:
@@ -2089,17 +2092,12 @@ class Jogger:
         must show the jog braking or at rest (a full planner runs on at speed).
         """
         oldest = self.ledger.oldest()
-        watching = self.phase is Phase.JOGGING or (
-            self.phase is Phase.STOPPING
-            and self._stop.phase is StopPhase.WAIT_ACKS
-            and not self._stop.cancelled
-        )
         if (
             oldest is None
             or oldest.owner != ENGINE
             or _kind(oldest) != "jog"
             or not oldest.on_wire
-            or not watching
+            or not self._queue_runs_as_sent()
         ):
             self._unread_entry = None
             return None
@@ -2271,10 +2269,9 @@ class Jogger:
         self, line: str, kind: str, now_s: float, out: list[Output], seg: PathSeg | None = None
     ) -> None:
         """Send a line and remember it until its ok/error."""
-        tag = _LineTag(kind, seg)
-        entry = self.ledger.record_line(ENGINE, line, now_s, tag)
-        tag.written_by_s = now_s + self.ledger.in_flight_bytes * self._byte_s
-        self._pending.append(entry)
+        in_flight_bytes = self.ledger.in_flight_bytes + line_cost_bytes(line)
+        tag = _LineTag(kind, seg, now_s + in_flight_bytes * self._byte_s)
+        self._pending.append(self.ledger.record_line(ENGINE, line, now_s, tag))
         self.stats.lines_sent += 1
         if kind == "jog":
             self.stats.jogs_sent += 1
