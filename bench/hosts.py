@@ -19,9 +19,10 @@ methods are written as their authors describe them, flaws included; none of them
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from smoothjog.core.intents import ContinuousIntent, Intent
-from smoothjog.core.jogger import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
+from smoothjog.core.jogger import EngineLimits, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.jogline import build_jog_line
 from smoothjog.core.ledger import ENGINE, Entry, Ledger
 from smoothjog.core.machine import MachineModel
@@ -289,9 +290,20 @@ class LongJog(_Host):
             self.active = True
 
 
-def smoothjog_host(model: MachineModel, ledger: Ledger, tuning: JogTuning | None = None) -> Jogger:
-    """smoothjog's own engine, as the host builds it."""
-    return Jogger(model, EngineLimits.from_model(model), tuning, ledger)
+@dataclass(frozen=True)
+class Shipped:
+    """smoothjog's own engine, built by the host itself as the product builds it.
+
+    Not a factory: the host fills in what it learns from the link (its byte time, a relay's idle
+    poll) before it makes the engine, which a factory would bypass. At 9600 baud an engine built
+    by a factory took 115200 baud's byte time and sized its polls and blocks for that wire.
+    """
+
+    tuning: JogTuning | None = None
+
+
+#: What a scenario runs: a reference host's engine factory, or smoothjog as shipped.
+Method = EngineFactory | Shipped
 
 
 REFERENCE_FACTORIES: dict[str, EngineFactory] = {

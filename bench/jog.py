@@ -17,11 +17,10 @@ import time
 from pathlib import Path
 
 from bench import scenarios as sc
-from bench.hosts import REFERENCE_FACTORIES, smoothjog_host
+from bench.hosts import REFERENCE_FACTORIES, Method, Shipped
 from smoothjog.core.jogger import Jogger
-from smoothjog.host import EngineFactory
 
-Factory = EngineFactory
+Factory = Method
 
 #: The real Grbl 1.1h figures of the engine issue (hobby router), medians of 5 runs.
 REAL_FIRMWARE: dict[str, dict[str, tuple[float, ...]]] = {
@@ -98,7 +97,7 @@ def run_all(
     machines: list[str], phases: int, firmware: str = "grbl"
 ) -> dict[str, dict[str, dict[str, dict[str, float]]]]:
     """results[machine][method][scenario] = median metrics over the release phases."""
-    methods: dict[str, Factory] = {SMOOTHJOG: smoothjog_host, **REFERENCE_FACTORIES}
+    methods: dict[str, Factory] = {SMOOTHJOG: Shipped(), **REFERENCE_FACTORIES}
     results: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     plots: dict[str, dict[str, dict[str, sc.Run]]] = {}
     for machine in machines:

@@ -7,7 +7,6 @@ smoothjog.sim.rig.LINK_MODELS); the table goes to links.md beside jog.md.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import hashlib
 import math
 import os
@@ -17,10 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bench import scenarios as sc
-from bench.hosts import REFERENCE_FACTORIES, smoothjog_host
+from bench.hosts import REFERENCE_FACTORIES, Method, Shipped
 from smoothjog.config import Config
 from smoothjog.core.jogger import JogTuning
-from smoothjog.host import EngineFactory
 from smoothjog.sim.rig import LINK_MODELS, LinkModel
 
 LONG_JOG = "one long jog + 0x85"
@@ -45,7 +43,7 @@ class Host:
     """One row's host: a name, the engine factory and the tuning it runs with, in words."""
 
     name: str
-    factory: EngineFactory
+    factory: Method
     tuning: str
 
 
@@ -56,12 +54,12 @@ def hosts() -> list[Host]:
     return [
         Host(
             "smoothjog",
-            smoothjog_host,
+            Shipped(bench_t),
             f"bench: JogTuning() (link margin {1000 * bench_t.link_margin_s:g} ms)",
         ),
         Host(
             "smoothjog",
-            functools.partial(smoothjog_host, tuning=cli_t),
+            Shipped(cli_t),
             f"CLI defaults (link margin {1000 * cli_t.link_margin_s:g} ms)",
         ),
         Host(LONG_JOG, REFERENCE_FACTORIES[LONG_JOG], "(its own: no engine tuning)"),
@@ -73,7 +71,7 @@ def phase_link(link: LinkModel, k: int) -> LinkModel:
     return dataclasses.replace(link, seed=1000 * link.seed + k)
 
 
-def _cycle_s(factory: EngineFactory) -> float:
+def _cycle_s(factory: Method) -> float:
     """The host's send cycle, to spread the releases over it (as the ideal-wire table does)."""
     from bench.jog import _cycle_s as cycle_on_ideal_wire
 

@@ -11,15 +11,15 @@ import math
 from dataclasses import dataclass, field
 
 from bench import measure
+from bench.hosts import Method, Shipped
 from smoothjog.core.intents import ContinuousIntent
 from smoothjog.core.units import mm_min_to_mm_s
-from smoothjog.host import EngineFactory
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
 from smoothjog.virtual import VirtualHost
 
-Factory = EngineFactory
+Factory = Method
 
 #: The stick's X direction: toward the far end of travel from the homed + corner.
 DIRECTION = -1.0
@@ -73,7 +73,10 @@ def _session(
     # Soft limits off, as in the real-firmware runs of the reference methods: the printed wiki
     # method queues 16 x 41 mm, which runs past the 800 mm travel and would meet error:15.
     rig.host_send(b"$20=0\n", 0.0)
-    vs = VirtualHost(rig, engine_factory=factory)
+    if isinstance(factory, Shipped):
+        vs = VirtualHost(rig, tuning=factory.tuning)
+    else:
+        vs = VirtualHost(rig, engine_factory=factory)
     vs.handshake()
     t0 = vs.now_s + 0.05
     vs.run_until(t0)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import pytest
 from bench import links
 from bench import scenarios as sc
+from bench.hosts import Shipped
 
 from smoothjog.config import Config
+from smoothjog.core.jogger import JogTuning
 from smoothjog.sim.rig import LINK_MODELS
 
 
@@ -39,6 +41,20 @@ def test_a_scenario_session_runs_on_the_link_it_is_given() -> None:
     vs, _t0 = sc._session(factory, "hobby-router", "grbl", LINK_MODELS["9600"])
     assert vs.rig.link == LINK_MODELS["9600"]
     assert vs.rig.firmware.tx_byte_s == pytest.approx(10 / 9600)
+    vs.close()
+
+
+@pytest.mark.parametrize("row", [0, 1])
+def test_the_smoothjog_rows_run_the_engine_the_host_builds_for_the_link(row: int) -> None:
+    # The engine as shipped: the host hands it the wire's byte time (and with it sizes blocks
+    # and polls). A factory building the engine itself kept 115200 baud's at 9600 baud.
+    method = links.hosts()[row].factory
+    assert isinstance(method, Shipped)
+    vs, _t0 = sc._session(method, "hobby-router", "grbl", LINK_MODELS["9600"])
+    engine = vs.host.engine
+    assert engine is not None
+    assert engine.tuning.byte_s == pytest.approx(10 / 9600)
+    assert engine.tuning.link_margin_s == (method.tuning or JogTuning()).link_margin_s
     vs.close()
 
 
