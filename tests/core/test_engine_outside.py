@@ -409,3 +409,68 @@ def test_a_rest_braking_into_a_reversal_from_a_faster_block_is_near_the_junction
     assert h.engine._near_a_junction_at_rest()
     track.x_est_mm = 2.764 - 1.4  # beyond the step's own reach (25²/500 = 1.25 mm)
     assert not h.engine._near_a_junction_at_rest()
+
+
+def test_fs_0_ahead_of_a_slow_jog_cruising_into_a_reversal_is_near_the_junction() -> None:
+    # A stick swept slowly through zero: an X- jog at 313 mm/min with an X+ jog queued behind
+    # it. FS is the speed at the end of the prepared segments, so it reads 0 while the machine
+    # still cruises the last committed time before the reversal (0.165 mm in the simulator).
+    from smoothjog.core.tracker import PathSeg
+
+    h = EngineHarness()
+    track = h.engine._track
+    track.begin((0.0, 0.0, 0.0), 0.0)
+    slow_mm_s = 313 / 60
+    track.append(PathSeg((0.0, 0.0, 0.0), (-2.0, 0.0, 0.0), 2.0, slow_mm_s, 500.0, 0.0))
+    back = PathSeg((-2.0, 0.0, 0.0), (-1.87, 0.0, 0.0), 0.13, 2.0, 500.0, 2.0)
+    track.append(back)
+    assert back.entry_cap_mm_s == 0.0
+    track.x_est_mm = 2.0 - 0.165
+    assert h.engine._near_a_junction_at_rest()
+    # Beyond what the committed segments cover at that speed: a rest there is someone else's.
+    track.x_est_mm = 2.0 - 0.5
+    assert not h.engine._near_a_junction_at_rest()
+
+
+def test_the_path_ends_where_the_firmware_sums_a_long_g91_stream() -> None:
+    # Grbl adds each G91 value to its position in single precision: far from zero the sum of a
+    # repeated increment drifts from the decimal one by half an ulp per line, the same way.
+    # The engine's path must follow the firmware's sum, or after a few hundred lines a
+    # faithful report lies more than two steps off it and is taken for an outside stop.
+    from smoothjog.core.units import f32
+
+    h = EngineHarness(limits={"envelope": None})
+    start = (-600.0, -1.0, -1.0)
+    h.rest_at(start)
+    h.intent(ContinuousIntent({"X": -1.0}, 0.37))  # 0.31 mm increments, 2.9 steps in 4 s
+    h.run(4.0)
+    jogs = h.jog_lines()
+    assert len(jogs) > 300
+    firmware_x = f32(start[0])
+    decimal_x = start[0]
+    for line in jogs:
+        value = float(line.split("X")[1].split("F")[0])
+        firmware_x = f32(firmware_x + f32(value))
+        decimal_x += value
+    steps_per_mm = 250.0
+    assert abs(decimal_x - firmware_x) * steps_per_mm > 2.0  # the drift the test is about
+    assert h.engine.planned_end_mm is not None
+    assert h.engine.planned_end_mm[0] == firmware_x
+
+
+def test_a_slide_along_an_edge_keeps_blocks_of_the_engine_time() -> None:
+    # At the Y+ soft limit, a stick pushed mostly into it with a little X slides along X at a
+    # fraction of the stick's speed. Its increments must last about one block, as any other's:
+    # cut to the stick's length they lasted seconds, and no later stick could undo them.
+    h = EngineHarness(soft_limits=True)
+    h.rest_at((-400.0, -0.004, -1.0))  # one step inside the edge at 0
+    h.intent(ContinuousIntent({"X": 0.01, "Y": 0.3}, 1.0))
+    h.run(0.5)
+    jogs = h.jog_lines()
+    assert jogs
+    for line in jogs:
+        assert "Y" not in line  # the blocked axis is dropped
+        dist_mm = float(line.split("X")[1].split("F")[0])
+        feed_mm_min = float(line.split("F")[1])
+        assert dist_mm / (feed_mm_min / 60.0) < 0.1, line
+    assert h.fault_texts() == []

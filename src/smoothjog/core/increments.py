@@ -131,6 +131,20 @@ def junction_speed_sqr(
     return max(0.0, junction_accel * deviation_mm * sin_half / (1.0 - sin_half))
 
 
+def braking_lead_mm(speed_mm_s: float, accel_mm_s2: float, lead_s: float) -> float:
+    """How far the machine runs in the last lead_s before it comes to rest from speed_mm_s.
+
+    It cruises, then brakes to rest over v/a: the last lead_s hold ½·a·t² of the braking, and
+    the cruise before it when lead_s is longer than the braking.
+    """
+    if speed_mm_s <= 0.0 or lead_s <= 0.0:
+        return 0.0
+    brake_s = speed_mm_s / accel_mm_s2
+    if lead_s <= brake_s:
+        return 0.5 * accel_mm_s2 * lead_s**2
+    return speed_mm_s**2 / (2.0 * accel_mm_s2) + speed_mm_s * (lead_s - brake_s)
+
+
 def let_run_turn_s(
     queued_mm: float, speed_mm_s: float, new_speed_mm_s: float, accel_mm_s2: float, *, reverse: bool
 ) -> float:

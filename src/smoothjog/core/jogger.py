@@ -57,6 +57,7 @@ from smoothjog.core.stopper import StopHandshake, StopPhase
 from smoothjog.core.tracker import PathSeg, PathTracker
 from smoothjog.core.units import (
     Vec,
+    g91_end,
     mm_min_to_mm_s,
     mm_s_to_mm_min,
     norm,
@@ -111,6 +112,9 @@ OFF_PATH_STOP_STEPS = 5.0
 UNREAD_REPORTS = 2
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
+#: Repeats of one increment before its run is worked out afresh from where the firmware put
+#: the last target: 16 lines drift at most 8 ulps off the ray, 0.001 mm within 2048 mm.
+CRUISE_LINES = 16
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 64
 #: How long a round trip far above the usual (a stall) keeps the queue long.
@@ -313,6 +317,7 @@ class _Cruise:
     clear_mm: float  # along unit_vec from where the run began
     run_mm: float  # path of the run sent so far
     next_start_mm: Vec  # where the next repeat must start (the end of the last one sent)
+    lines: int = 0  # repeats sent (the run is worked out afresh after CRUISE_LINES)
 
 
 @dataclass
@@ -1080,6 +1085,7 @@ class Jogger:
         start = self._track.end_mm
         assert start is not None
         cruise = self._cruise
+        end: Vec | None = None
         if (
             cruise is not None
             and cruise.move is move
@@ -1087,21 +1093,30 @@ class Jogger:
             and cruise.limits is self.limits
             and start == cruise.next_start_mm
             and cruise.clear_mm >= cruise.run_mm + cruise.seg_len_mm
+            and cruise.lines < CRUISE_LINES
         ):
             # Hot path: the same increment again, along the ray whose clear distance was
-            # worked out when this run began (every start of the run lies on that ray).
+            # worked out when this run began. The firmware's single-precision sums leave
+            # each start up to half an ulp per line off that ray, so the run is worked out
+            # afresh every CRUISE_LINES lines, and at once if the end would leave the envelope.
             line, deltas, seg_len = cruise.line, cruise.deltas_mm, cruise.seg_len_mm
             run_mm = cruise.run_mm + seg_len
             seg_move = move
-        else:
+            end = g91_end(start, deltas)
+            if not self._fits_envelope(end):
+                end = None
+        if end is None:
             made = self._make_increment(start, move, length_mm)
             if made is None:
                 return False
             line, deltas, seg_len, cruise, seg_move = made
             run_mm = seg_len
-        end = tuple(s + d for s, d in zip(start, deltas, strict=True))
-        if not self._fits_envelope(end):
-            return False
+            # Where the firmware's parser will put the target, not the sum in doubles: the
+            # path then stays on the machine's however long the jog (a report off it by more
+            # than two steps is taken for an outside stop).
+            end = g91_end(start, deltas)
+            if not self._fits_envelope(end):
+                return False
         if self.limits.keepouts and not self._ghost_clear(deltas):
             # Sent now, this line would run from wherever an outside stop left the machine
             # (firmware-facts §3.1) and could cut into a keep-out: wait until the machine has
@@ -1114,6 +1129,7 @@ class Jogger:
         if cruise is not None:
             cruise.run_mm = run_mm
             cruise.next_start_mm = end
+            cruise.lines += 1
         self._cruise = cruise
         seg = PathSeg(
             start,
@@ -1261,6 +1277,12 @@ class Jogger:
                 return None
             step_mm = self._step_along_mm(m.unit_vec)
             t = length_mm
+            if m is not move:
+                # A slide runs slower than the move it is cut from (only the axes left move):
+                # the same length would last that much longer, and a stick held nearly square
+                # to the edge would queue blocks of seconds that no later stick can undo. Keep
+                # the block's time, and at least a step and a half (as _block_s does).
+                t = max(length_mm * m.speed_mm_s / move.speed_mm_s, 1.5 * step_mm)
             blocked: int | None = None
             env = self.limits.envelope
             if env is not None:
@@ -2152,7 +2174,18 @@ class Jogger:
             # before such a junction, its last segments still running.
             reach_in_mm = reach_mm
             if before is not None:
-                reach_in_mm = max(reach_mm, before.speed_mm_s**2 / before.accel_mm_s2)
+                # FS is the speed at the end of the segments already prepared, which run ahead
+                # of the machine by the committed time: a slow jog cruising into the junction
+                # shows FS:0 about that far before it (a stick swept slowly through zero gave
+                # FS:0 0.165 mm, 32 ms, before the reversal of a 313 mm/min jog, still moving).
+                lead_mm = inc.braking_lead_mm(
+                    before.speed_mm_s, before.accel_mm_s2, self.tuning.committed_s
+                )
+                reach_in_mm = max(
+                    reach_mm,
+                    before.speed_mm_s**2 / before.accel_mm_s2,
+                    lead_mm + OUTSIDE_LAG_MM,
+                )
             if seg.x0_mm - reach_in_mm <= x <= seg.x0_mm + reach_mm:
                 return True
         return False

@@ -9,6 +9,7 @@ floats in axis order; conversions between mm/min and mm/s happen only through th
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Sequence
 
 #: Every axis letter a Grbl-family controller may accept in a jog, in report order.
@@ -19,6 +20,34 @@ GRBL_AXES: tuple[str, ...] = ("X", "Y", "Z")
 MM_PER_INCH = 25.4
 
 Vec = tuple[float, ...]
+
+_SINGLE = struct.Struct("<f")
+
+
+def f32(x: float) -> float:
+    """x rounded to the nearest IEEE single, as storing it in a C float does (inf beyond range).
+
+    Grbl keeps every length in singles (firmware-facts §1.5; grblHAL and FluidNC keep positions
+    in C floats too), so one single-precision operation is `f32` of the double result.
+    """
+    try:
+        single: float = _SINGLE.unpack(_SINGLE.pack(x))[0]
+    except OverflowError:
+        return math.copysign(math.inf, x)
+    return single
+
+
+def g91_end(start: Vec, deltas: Vec) -> Vec:
+    """Where the controller's parser puts a G91 line's target: each axis the line moves is
+    the single-precision sum of its position and the value; the others stay where they are.
+
+    A stream of increments summed in doubles drifts from the firmware's sum by up to half an
+    ulp per line, in the same direction while the increment repeats (firmware-facts §1.5): a
+    few hundredths of a mm over a long jog, far more than a step.
+    """
+    return tuple(
+        s if d == 0.0 else f32(f32(s) + f32(d)) for s, d in zip(start, deltas, strict=True)
+    )
 
 
 def mm_min_to_mm_s(feed_mm_min: float) -> float:

@@ -15,27 +15,30 @@ The sim applies the same arithmetic to grblHAL and FluidNC, which also keep posi
 from __future__ import annotations
 
 import math
-import struct
 
-_SINGLE = struct.Struct("<f")
-_pack = _SINGLE.pack
-_unpack = _SINGLE.unpack
-
-
-def f32(x: float) -> float:
-    """x rounded to the nearest IEEE single, as storing it in a C float does (inf beyond range)."""
-    try:
-        single: float = _unpack(_pack(x))[0]
-    except OverflowError:
-        return math.copysign(math.inf, x)
-    return single
-
+from smoothjog.core.units import f32
 
 #: The constants of nuts_bolts.c:read_float and nuts_bolts.h, as singles (AVR: double is float).
 F32_0_01 = f32(0.01)
 F32_0_1 = f32(0.1)
 MM_PER_INCH_F32 = f32(25.4)
 INCH_PER_MM_F32 = f32(0.0393701)
+
+#: f32 is defined once, in core.units (the engine tracks the firmware's sums with it).
+__all__ = [
+    "F32_0_01",
+    "F32_0_1",
+    "INCH_PER_MM_F32",
+    "MAX_INT_DIGITS",
+    "MM_PER_INCH_F32",
+    "f32",
+    "lround",
+    "mm_to_steps",
+    "print_coord",
+    "print_float",
+    "read_float",
+    "steps_to_mm",
+]
 
 #: read_float's MAX_INT_DIGITS: digits beyond the 8th carry no value (integer ones still scale).
 MAX_INT_DIGITS = 8
