@@ -464,7 +464,7 @@ def test_a_slide_along_an_edge_keeps_blocks_of_the_engine_time() -> None:
     # cut to the stick's length they lasted seconds, and no later stick could undo them.
     h = EngineHarness(soft_limits=True)
     h.rest_at((-400.0, -0.004, -1.0))  # one step inside the edge at 0
-    h.intent(ContinuousIntent({"X": 0.01, "Y": 0.3}, 1.0))
+    h.intent(ContinuousIntent({"X": 0.03, "Y": 0.3}, 1.0))  # the slide: 10 % of the speed
     h.run(0.5)
     jogs = h.jog_lines()
     assert jogs
@@ -473,4 +473,16 @@ def test_a_slide_along_an_edge_keeps_blocks_of_the_engine_time() -> None:
         dist_mm = float(line.split("X")[1].split("F")[0])
         feed_mm_min = float(line.split("F")[1])
         assert dist_mm / (feed_mm_min / 60.0) < 0.1, line
+    assert h.fault_texts() == []
+
+
+def test_a_stick_nearly_square_to_an_edge_stops_there_rather_than_crawl_along_it() -> None:
+    # 3 % of the stick's speed left along the edge is a wobble of the stick, not a request to
+    # crawl: each such block would hold the planner for a second or more.
+    h = EngineHarness(soft_limits=True)
+    h.rest_at((-400.0, -0.004, -1.0))
+    h.intent(ContinuousIntent({"X": 0.01, "Y": 0.3}, 1.0))
+    h.run(0.5)
+    assert h.jog_lines() == []
+    assert any("the jog stops at the soft limit" in e.text for e in h.engine.events)
     assert h.fault_texts() == []

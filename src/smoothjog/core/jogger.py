@@ -112,6 +112,9 @@ OFF_PATH_STOP_STEPS = 5.0
 UNREAD_REPORTS = 2
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
+#: The least speed a slide along an edge keeps, as a share of the stick's: below it (a stick
+#: within 3° of square to the edge) the jog stops at the edge rather than crawl along it.
+SLIDE_MIN_SHARE = 0.05
 #: Repeats of one increment before its run is worked out afresh from where the firmware put
 #: the last target: 16 lines drift at most 8 ulps off the ray, 0.001 mm within 2048 mm.
 CRUISE_LINES = 16
@@ -1274,6 +1277,10 @@ class Jogger:
                 else inc.vector_move(vel, self.limits.max_rate_mm_min, self.limits.accel_mm_s2)
             )
             if m is None:
+                return None
+            if m is not move and m.speed_mm_s < SLIDE_MIN_SHARE * move.speed_mm_s:
+                # Pushed nearly square into the edge: what is left is a crawl (a stick's
+                # wobble), which would hold the planner for seconds. The jog stops there.
                 return None
             step_mm = self._step_along_mm(m.unit_vec)
             t = length_mm
