@@ -246,6 +246,8 @@ class Host:
     cmd: tuple[str, ...]
     #: The folder put on PYTHONPATH (a checkout's src); None runs the installed command as is.
     src: Path | None = None
+    #: How the report names a host that is not smoothjog (the streaming floor).
+    label: str | None = None
 
     def env(self) -> dict[str, str]:
         """The environment of its runs: no user config, PYTHONPATH set to src when there is one."""
@@ -256,6 +258,8 @@ class Host:
 
     def shown(self, args: str) -> str:
         """The command line of `smoothjog ARGS` as the report writes it."""
+        if self.label is not None:
+            return f"`{self.label} {args}`"
         if self.src is None:
             return f"`smoothjog {args}`"
         return f"`python -m smoothjog {args}` with PYTHONPATH={self.src}"
@@ -297,6 +301,13 @@ def host_from_src(src: str, role: str) -> Host:
             " benchmark from a folder without its own smoothjog package, or check the path"
         )
     return host
+
+
+def floor_host() -> Host:
+    """The streaming floor (bench/cpu_floor.py): the same traffic with no engine behind it."""
+    top = Path(__file__).resolve().parent.parent
+    cmd = (sys.executable, "-m", "bench.cpu_floor")
+    return Host("floor", cmd, top, "python -m bench.cpu_floor")
 
 
 def find_smoothjog() -> str:
@@ -754,10 +765,17 @@ def _parser() -> argparse.ArgumentParser:
         help="the tree under test: a checkout's src, run as python -m smoothjog with PYTHONPATH=DIR"
         " (default: the installed smoothjog); the simulator runs from it too",
     )
-    parser.add_argument(
+    reference = parser.add_mutually_exclusive_group()
+    reference.add_argument(
         "--reference-src",
         metavar="DIR",
         help="a second checkout's src, measured back to back with the host under test",
+    )
+    reference.add_argument(
+        "--floor",
+        action="store_true",
+        help="measure bench/cpu_floor.py back to back as the reference: the same lines and"
+        " polls with no engine, the event loop's and the kernel's share alone",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--note", help="a line for the report, e.g. which tree was measured")
@@ -863,6 +881,8 @@ def _git(folder: Path, *args: str) -> str:
 
 def _tree(host: Host) -> str:
     """Which smoothjog the host's runs import, and its commit: a PYTHONPATH may pick a copy."""
+    if host.label is not None:
+        return "bench/cpu_floor.py (streaming only: no engine, ledger or tracker)"
     try:
         package = _imported_from(host.env())
     except BenchError:
@@ -911,7 +931,9 @@ def main(argv: list[str] | None = None) -> int:
                 else Host("under test", (args.smoothjog or find_smoothjog(),))
             )
             reference = (
-                host_from_src(args.reference_src, "reference") if args.reference_src else None
+                host_from_src(args.reference_src, "reference")
+                if args.reference_src
+                else (floor_host() if args.floor else None)
             )
             with Bench(under, args.machine, args.firmware, args.axis) as bench:
                 controller = bench.info()

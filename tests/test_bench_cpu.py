@@ -125,6 +125,22 @@ def test_cpu_bench_runs_the_real_commands_and_writes_its_table(
     assert float(moved.group(1)) > 0
 
 
+def test_the_floor_streams_the_same_jog_against_the_real_simulator(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # bench/cpu_floor.py is the reference of `--floor`: it must really jog (the bench refuses a
+    # run that did not move as scripted) and be named in the report for what it is.
+    argv = ["--floor", "--hold-s", "0.5", "--repeat", "1", "--speeds", "1.0", "--quiet", "--out"]
+    code = cpu.main([*argv, str(tmp_path)])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    text = (tmp_path / "cpu.md").read_text(encoding="utf-8")
+    assert "Reference host: `python -m bench.cpu_floor jog --port PTY" in text
+    assert "streaming only: no engine, ledger or tracker" in text
+    (cells,) = _cells(text)
+    assert re.fullmatch(r"-?\d+\.\d+", cells["under test / reference, per repeat"])
+
+
 def _cells(text: str) -> list[dict[str, str]]:
     """The report's table as one dict per row, keyed by column heading."""
     rows = [line for line in text.splitlines() if line.startswith("| ")]
