@@ -18,7 +18,7 @@ from pathlib import Path
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, Method, Shipped
 from smoothjog.config import Config
-from smoothjog.core.jogger import JogTuning
+from smoothjog.core.jogger import Jogger, JogTuning
 from smoothjog.sim.rig import LINK_MODELS, LinkModel
 
 LONG_JOG = "one long jog + 0x85"
@@ -71,11 +71,26 @@ def phase_link(link: LinkModel, k: int) -> LinkModel:
     return dataclasses.replace(link, seed=1000 * link.seed + k)
 
 
-def _cycle_s(factory: Method) -> float:
-    """The host's send cycle, to spread the releases over it (as the ideal-wire table does)."""
-    from bench.jog import _cycle_s as cycle_on_ideal_wire
+def cycle_on_link_s(factory: Method, link: LinkModel) -> float:
+    """The host's send cycle on this link, to spread the releases over all of its phases.
 
-    return cycle_on_ideal_wire(factory, LINK_MACHINE)
+    smoothjog's blocks grow with a slow wire (a jog line must cross it within 60 % of a block:
+    about 42 ms at 9600 baud) and a long round trip; phases spread over the ideal wire's 10.5 ms
+    would sample a quarter of such a cycle. Measured as the mean time between the jog lines sent
+    in a second of full-speed hold; a reference method keeps its own fixed cycle.
+    """
+    vs, _t0 = sc._session(factory, LINK_MACHINE, "grbl", link)
+    try:
+        vs.set_intent(sc._stick(1.0))
+        vs.run_until(vs.now_s + 1.0)
+        driver = vs.driver
+        if not isinstance(driver, Jogger):
+            return float(getattr(driver, "cycle_s", 0.010))
+        sent = driver.stats.jogs_sent
+        vs.run_until(vs.now_s + 1.0)
+        return 1.0 / max(driver.stats.jogs_sent - sent, 1)
+    finally:
+        vs.close()
 
 
 Results = dict[str, dict[int, dict[str, dict[str, float]]]]
@@ -89,15 +104,16 @@ def run_links(
     rows = hosts()
     results: Results = {}
     plots: Plots = {}
-    cycles = [_cycle_s(h.factory) for h in rows]
     for name in names:
         base = LINK_MODELS[name]
         results[name] = {}
         plots[name] = {}
         for i, host in enumerate(rows):
             runs: dict[str, list[sc.Run]] = {}
+            cycle = cycle_on_link_s(host.factory, base)
+            results[name][i] = {"cycle": {"s": cycle}}
             for k in range(phases):
-                off = cycles[i] * (k + 0.5) / phases
+                off = cycle * (k + 0.5) / phases
                 link = phase_link(base, k)
                 f = host.factory
                 runs.setdefault("S1", []).append(
@@ -110,7 +126,7 @@ def run_links(
                 runs.setdefault("S5", []).append(
                     sc.release(f, LINK_MACHINE, firmware, off, 0.1, link=link)
                 )
-            results[name][i] = {
+            results[name][i] |= {
                 key: {m: statistics.median(r.metrics[m] for r in rs) for m in rs[0].metrics}
                 for key, rs in runs.items()
             }
@@ -306,6 +322,16 @@ def report(names: list[str], phases: int, out: Path, command: str) -> list[str]:
         "## Results",
         "",
         *table(results, rows, ph),
+        "",
+        "The releases of each row are spread evenly over that host's send cycle on that link"
+        " (the mean time between its jog lines during a full-speed hold, measured first);"
+        " smoothjog's, CLI defaults: "
+        + ", ".join(
+            f"{name} {1000 * by_host[1]['cycle']['s']:.1f} ms"
+            for name, by_host in results.items()
+            if "cycle" in by_host[1]
+        )
+        + ".",
         "",
         "In brackets after the S1 and S5 distances: the lowest and highest over the phases. "
         "Both smoothjog rows are the engine as it is; the tuning column says which JogTuning the "

@@ -77,3 +77,13 @@ def test_the_table_says_whether_the_s1_ratio_meets_its_target() -> None:
     assert met[-1] == "| ideal | 1.040 (met) | 1.040 (met) |"
     assert missed[-1] == "| ideal | 1.060 (NOT met) | 1.060 (NOT met) |"
     assert sum(line.startswith("| ideal | ") for line in met) == 4  # three hosts, one ratio
+
+
+def test_the_releases_are_spread_over_the_send_cycle_of_each_link() -> None:
+    # At 9600 baud a jog line takes 25 ms to cross, so smoothjog's blocks are about 40 ms:
+    # phases spread over the ideal wire's 10.5 ms would sample a quarter of that cycle.
+    shipped = links.hosts()[1].factory
+    ideal_s = links.cycle_on_link_s(shipped, LINK_MODELS["ideal"])
+    slow_s = links.cycle_on_link_s(shipped, LINK_MODELS["9600"])
+    assert ideal_s == pytest.approx(0.0105, rel=0.05)
+    assert slow_s > 3 * ideal_s
