@@ -2136,11 +2136,13 @@ class Jogger:
             tag = oldest.tag
             assert isinstance(tag, _LineTag)
             # Written by written_by_s, the line reaches the controller one way of the link later
-            # (a Wi-Fi bridge: 20-60 ms), which the slow round trip bounds. A `?` sent before
-            # then may overtake nothing, yet come back before the line is in: on the bridge
-            # such a report was counted, and a slow jog was taken for an outside stop.
+            # (a Wi-Fi bridge: 20-60 ms) and is answered after its parse. A report asked
+            # before then can come back ahead of that `ok` though nothing is wrong: on the
+            # bridge two such reports took a slow jog for an outside stop. The usual round
+            # trip (a low percentile, not the slow end, which a stall inflates to 0.5 s and
+            # which would blind the sign for the holds it is there for) covers that.
             self._unread_seen_s = (
-                tag.written_by_s + self._rtt_hi_s if oldest.echo_s is None else oldest.echo_s
+                tag.written_by_s + self._rtt_s if oldest.echo_s is None else oldest.echo_s
             )
         if asked_s is None or asked_s <= self._unread_seen_s:
             return None
