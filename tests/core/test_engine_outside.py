@@ -499,3 +499,23 @@ def test_a_stick_nearly_square_to_an_edge_stops_there_rather_than_crawl_along_it
     assert h.jog_lines() == []
     assert any("the jog stops at the soft limit" in e.text for e in h.engine.events)
     assert h.fault_texts() == []
+
+
+def test_the_start_of_a_fresh_jog_is_no_junction_at_rest() -> None:
+    # A jog starts from rest at its first segment, but speeding up it reports a rising FS; a
+    # braking report 14 mm in is someone else's stop, not the start's. Counted as a junction,
+    # the start hid a feed hold there, and the lines in the buffer ran 37 mm (fuzz, FTDI).
+    from smoothjog.core.tracker import PathSeg
+
+    h = EngineHarness()
+    track = h.engine._track
+    track.begin((0.0, 0.0, 0.0), 0.0)
+    first = PathSeg((0.0, 0.0, 0.0), (-4.794, 0.0, 0.0), 4.794, 87.4, 500.0, 0.0)
+    track.append(first)
+    assert first.entry_cap_mm_s == 0.0
+    x0 = 4.794
+    for _ in range(8):
+        track.append(PathSeg((-x0, 0.0, 0.0), (-x0 - 1.736, 0.0, 0.0), 1.736, 87.4, 500.0, x0))
+        x0 += 1.736
+    track.x_est_mm = 13.75
+    assert not h.engine._near_a_junction_at_rest()

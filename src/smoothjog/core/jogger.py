@@ -2181,26 +2181,27 @@ class Jogger:
         prev = None
         for seg in self._track.path:
             before, prev = prev, seg
-            if seg.entry_cap_mm_s >= 0.1 * seg.speed_mm_s:
+            if before is None or seg.entry_cap_mm_s >= 0.1 * seg.speed_mm_s:
+                # The path's first segment starts from rest, which is no junction: a jog
+                # speeding up from there reports a rising FS, never a braking one. Counted as
+                # one, it hid a feed hold 14 mm into a fresh jog, and 37 mm ran on (fuzz).
                 continue
             reach_mm = seg.speed_mm_s**2 / seg.accel_mm_s2 + OUTSIDE_LAG_MM
             # The machine brakes into the junction from the block before it, which may be the
             # faster one (a step run out into a slow jog back): FluidNC reported FS:0 0.41 mm
-            # before such a junction, its last segments still running.
-            reach_in_mm = reach_mm
-            if before is not None:
-                # FS is the speed at the end of the segments already prepared, which run ahead
-                # of the machine by the committed time: a slow jog cruising into the junction
-                # shows FS:0 about that far before it (a stick swept slowly through zero gave
-                # FS:0 0.165 mm, 32 ms, before the reversal of a 313 mm/min jog, still moving).
-                lead_mm = inc.braking_lead_mm(
-                    before.speed_mm_s, before.accel_mm_s2, self.tuning.committed_s
-                )
-                reach_in_mm = max(
-                    reach_mm,
-                    before.speed_mm_s**2 / before.accel_mm_s2,
-                    lead_mm + OUTSIDE_LAG_MM,
-                )
+            # before such a junction, its last segments still running. FS is the speed at the
+            # end of the segments already prepared, which run ahead of the machine by the
+            # committed time: a slow jog cruising into the junction shows FS:0 about that far
+            # before it (a stick swept slowly through zero gave FS:0 0.165 mm, 32 ms, before
+            # the reversal of a 313 mm/min jog, still moving).
+            lead_mm = inc.braking_lead_mm(
+                before.speed_mm_s, before.accel_mm_s2, self.tuning.committed_s
+            )
+            reach_in_mm = max(
+                reach_mm,
+                before.speed_mm_s**2 / before.accel_mm_s2,
+                lead_mm + OUTSIDE_LAG_MM,
+            )
             if seg.x0_mm - reach_in_mm <= x <= seg.x0_mm + reach_mm:
                 return True
         return False
