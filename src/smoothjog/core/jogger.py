@@ -112,6 +112,9 @@ OFF_PATH_STOP_STEPS = 5.0
 UNREAD_REPORTS = 2
 #: Status polling while an owed cancel waits for the stale lines to show themselves.
 OWED_POLL_S = 0.010
+#: Steps (of the busiest axis) every block moves at least: Grbl plans a block under half a step
+#: as nothing, so shorter blocks of a very slow jog would be all rounding.
+MIN_BLOCK_STEPS = 1.5
 #: The least speed a slide along an edge keeps, as a share of the stick's: below it (a stick
 #: within 3° of square to the edge) the jog stops at the edge rather than crawl along it.
 SLIDE_MIN_SHARE = 0.05
@@ -1005,7 +1008,7 @@ class Jogger:
             / (move.speed_mm_s * (usable - 1)),
             # A very slow jog still moves at least a step and a half per block: shorter blocks
             # are all rounding (Grbl plans a block under half a step as nothing).
-            1.5 * self._step_along_mm(move.unit_vec) / move.speed_mm_s,
+            MIN_BLOCK_STEPS * self._step_along_mm(move.unit_vec) / move.speed_mm_s,
         )
         self._block_cache = (move, self.limits, (self._rtt_hi_s, self._line_bytes), block_s)
         return block_s
@@ -1278,18 +1281,18 @@ class Jogger:
             )
             if m is None:
                 return None
-            if m is not move and m.speed_mm_s < SLIDE_MIN_SHARE * move.speed_mm_s:
-                # Pushed nearly square into the edge: what is left is a crawl (a stick's
-                # wobble), which would hold the planner for seconds. The jog stops there.
-                return None
             step_mm = self._step_along_mm(m.unit_vec)
             t = length_mm
             if m is not move:
+                if m.speed_mm_s < SLIDE_MIN_SHARE * move.speed_mm_s:
+                    # Pushed nearly square into the edge: what is left is a crawl (a stick's
+                    # wobble), which would hold the planner for seconds. The jog stops there.
+                    return None
                 # A slide runs slower than the move it is cut from (only the axes left move):
                 # the same length would last that much longer, and a stick held nearly square
                 # to the edge would queue blocks of seconds that no later stick can undo. Keep
-                # the block's time, and at least a step and a half (as _block_s does).
-                t = max(length_mm * m.speed_mm_s / move.speed_mm_s, 1.5 * step_mm)
+                # the block's time, and at least MIN_BLOCK_STEPS (as _block_s does).
+                t = max(length_mm * m.speed_mm_s / move.speed_mm_s, MIN_BLOCK_STEPS * step_mm)
             blocked: int | None = None
             env = self.limits.envelope
             if env is not None:
