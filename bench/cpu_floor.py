@@ -24,6 +24,9 @@ from pathlib import Path
 
 import serial  # type: ignore[import-untyped,unused-ignore]
 
+# The floor imports nothing of smoothjog: its start-up would then cost what an engine's does,
+# and the short run it is measured against would vary by more than the traffic costs. The
+# engine's figures are copied here, and tests/test_bench_cpu.py checks them against the engine.
 #: One block: the engine's shortest (core/jogger.py JogTuning.dt_floor_s).
 BLOCK_S = 0.0105
 #: Blocks written at once when a press begins, so the planner never starves.
@@ -74,6 +77,13 @@ class FloorHost:
     def write(self, data: bytes) -> None:
         """Write at once (a pty takes it whole)."""
         os.write(self.fd, data)
+
+
+def jog_line(axis: str, dist_mm: float, feed_mm_min: float) -> bytes:
+    """The `$J=` line smoothjog's jogline.build_jog_line writes for this move, with its `\n`."""
+    # Four decimals without trailing zeros, as jogline.format_number writes them.
+    dist = f"{dist_mm:.4f}".rstrip("0").rstrip(".")
+    return f"$J=G21G91{axis}{dist}F{feed_mm_min:g}\n".encode()
 
 
 class _Stream:
@@ -157,7 +167,7 @@ async def _run(
             await asyncio.sleep(max(t0 + t_s - loop.time(), 0.0))
             if new_sign == 0 or i + 1 == len(events):
                 break
-            line = f"$J=G21G91{axis}{new_sign * step_mm:.4f}F{feed_mm_min:g}\n".encode()
+            line = jog_line(axis, new_sign * step_mm, feed_mm_min)
             if sign == 0:
                 host.write(line * LEAD_BLOCKS)
             sign = new_sign

@@ -129,8 +129,10 @@ def test_the_floor_streams_the_same_jog_against_the_real_simulator(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # bench/cpu_floor.py is the reference of `--floor`: it must really jog (the bench refuses a
-    # run that did not move as scripted) and be named in the report for what it is.
-    argv = ["--floor", "--hold-s", "0.5", "--repeat", "1", "--speeds", "1.0", "--quiet", "--out"]
+    # run that did not move as scripted) and be named in the report for what it is. The hold is
+    # long enough (1.4 s more than the short run) that the floor's own cost shows above the
+    # spread of its start-up, so the ratio has a positive reference to divide by.
+    argv = ["--floor", "--hold-s", "1.5", "--repeat", "1", "--speeds", "1.0", "--quiet", "--out"]
     code = cpu.main([*argv, str(tmp_path)])
     printed = capsys.readouterr()
     assert code == 0, printed.err
@@ -139,6 +141,22 @@ def test_the_floor_streams_the_same_jog_against_the_real_simulator(
     assert "streaming only: no engine, ledger or tracker" in text
     (cells,) = _cells(text)
     assert re.fullmatch(r"-?\d+\.\d+", cells["under test / reference, per repeat"])
+
+
+def test_the_floor_sends_what_the_engine_would() -> None:
+    # The floor copies the engine's block and poll period and writes its lines by hand (it
+    # imports nothing of smoothjog): both must stay what the engine does.
+    from bench import cpu_floor
+
+    from smoothjog.core.jogger import JogTuning
+    from smoothjog.core.jogline import build_jog_line
+
+    engine = JogTuning()
+    assert engine.dt_floor_s == cpu_floor.BLOCK_S
+    assert engine.poll_moving_s == cpu_floor.POLL_S
+    for axis, dist_mm, feed_mm_min in (("X", -0.875, 5000.0), ("Y", 0.4375, 2500.0)):
+        expected = build_jog_line(moves={axis: dist_mm}, feed_mm_min=feed_mm_min) + "\n"
+        assert cpu_floor.jog_line(axis, dist_mm, feed_mm_min) == expected.encode()
 
 
 def _cells(text: str) -> list[dict[str, str]]:
