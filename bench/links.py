@@ -99,19 +99,22 @@ Plots = dict[str, dict[int, dict[str, sc.Run]]]
 
 def run_links(
     names: list[str], phases: int, firmware: str = "grbl"
-) -> tuple[Results, Plots, list[Host]]:
-    """results[link][host index][scenario] = median metrics over the release phases."""
+) -> tuple[Results, Plots, list[Host], dict[str, list[float]]]:
+    """results[link][host index][scenario] = median metrics over the release phases; also the
+    send cycle each host's releases were spread over, per link (cycles[link][host index])."""
     rows = hosts()
     results: Results = {}
     plots: Plots = {}
+    cycles: dict[str, list[float]] = {}
     for name in names:
         base = LINK_MODELS[name]
         results[name] = {}
         plots[name] = {}
+        cycles[name] = []
         for i, host in enumerate(rows):
             runs: dict[str, list[sc.Run]] = {}
             cycle = cycle_on_link_s(host.factory, base)
-            results[name][i] = {"cycle": {"s": cycle}}
+            cycles[name].append(cycle)
             for k in range(phases):
                 off = cycle * (k + 0.5) / phases
                 link = phase_link(base, k)
@@ -126,7 +129,7 @@ def run_links(
                 runs.setdefault("S5", []).append(
                     sc.release(f, LINK_MACHINE, firmware, off, 0.1, link=link)
                 )
-            results[name][i] |= {
+            results[name][i] = {
                 key: {m: statistics.median(r.metrics[m] for r in rs) for m in rs[0].metrics}
                 for key, rs in runs.items()
             }
@@ -136,7 +139,7 @@ def run_links(
                 results[name][i][key] |= {"dist_lo_mm": min(dists), "dist_hi_mm": max(dists)}
             plots[name][i] = {key: rs[0] for key, rs in runs.items()}
         print(f"  ran the links table on {name}", flush=True)
-    return results, plots, rows
+    return results, plots, rows, cycles
 
 
 def _mm(value: float, digits: int = 2) -> str:
@@ -299,7 +302,8 @@ def code_version() -> str:
 
 def report(names: list[str], phases: int, out: Path, command: str) -> list[str]:
     """Run the per-link table, write links.md and its plots into out; returns the lines."""
-    results, plots, rows = run_links(names, phases)
+    results, plots, rows, cycles = run_links(names, phases)
+    cli = next(i for i, h in enumerate(rows) if h.tuning.startswith("CLI defaults"))
     ph = sc.physics(LINK_MACHINE)
     lines = [
         "# Jog benchmark on modelled links",
@@ -326,11 +330,7 @@ def report(names: list[str], phases: int, out: Path, command: str) -> list[str]:
         "The releases of each row are spread evenly over that host's send cycle on that link"
         " (the mean time between its jog lines during a full-speed hold, measured first);"
         " smoothjog's, CLI defaults: "
-        + ", ".join(
-            f"{name} {1000 * by_host[1]['cycle']['s']:.1f} ms"
-            for name, by_host in results.items()
-            if "cycle" in by_host[1]
-        )
+        + ", ".join(f"{name} {1000 * by_link[cli]:.1f} ms" for name, by_link in cycles.items())
         + ".",
         "",
         "In brackets after the S1 and S5 distances: the lowest and highest over the phases. "
