@@ -62,6 +62,24 @@ async def center(page: Any, selector: str) -> tuple[float, float]:
     return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 
 
+FLICK_JS = """([x, y]) => new Promise((done) => {
+  const el = document.querySelector("#stick-xy");
+  const at = (type, dx) => el.dispatchEvent(new PointerEvent(type, {
+    pointerId: 1, pointerType: "mouse", isPrimary: true, bubbles: true, cancelable: true,
+    clientX: x + dx, clientY: y, buttons: type === "pointerup" ? 0 : 1,
+  }));
+  at("pointerdown", 0);
+  let step = 0;
+  const next = () => {
+    step += 1;
+    at("pointermove", 40 * step);
+    if (step < 5) setTimeout(next, 8);
+    else { at("pointerup", 40 * step); done(); }
+  };
+  setTimeout(next, 8);
+})"""
+
+
 # -- sticks ---------------------------------------------------------------------------------------
 
 
@@ -129,10 +147,10 @@ async def test_inertial_flick_coasts_with_decaying_speed_and_a_tap_stops(
     _, backend, page = await start(pendant, open_page)
     await page.check("#inertial")
     cx, cy = await center(page, "#stick-xy")
-    await page.mouse.move(cx, cy)
-    await page.mouse.down()
-    await page.mouse.move(cx + 150, cy, steps=4)
-    await page.mouse.up()
+    # The flick is played inside the page on its own timers: the stick measures the finger's
+    # speed in real time, and a gesture sent step by step from here would be as slow as the
+    # round trips to a loaded browser. Five 40 px moves 8 ms apart, then the lift.
+    await page.evaluate(FLICK_JS, [cx, cy])
     await page.wait_for_selector("#stick-xy.coasting", state="attached")
     # Skip the drag's last jogs, which may still be on their way (sends are 20 ms apart).
     await asyncio.sleep(0.06)
