@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from smoothjog.core.tracker import (
     PATH_KEEP_MM,
@@ -126,6 +128,78 @@ def test_nearest_in_steps_weighs_each_axis_by_its_own_steps() -> None:
     t = 51 / 110
     assert steps == pytest.approx(100 * (0.5 - t), abs=1e-6)
     assert q == pytest.approx((10 * t, 0.01 * t, 0.0), abs=1e-6)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    ends=st.lists(st.integers(0, 12), min_size=2, max_size=30),
+    report_mm=st.integers(0, 48).map(lambda q: q / 4),
+    est_frac=st.floats(0.0, 1.0),
+)
+def test_a_report_on_a_path_of_many_passes_takes_the_pass_nearest_the_estimate(
+    ends: list[int], report_mm: float, est_frac: float
+) -> None:
+    # Back and forth along X between whole millimetres: most reports lie on several passes.
+    track = tracker()
+    for end in ends:
+        if end != track.end_mm[0]:  # type: ignore[index]
+            add(track, (float(end), 0.0, 0.0))
+    if not track.path:
+        return
+    track.ack(track.path[0], 0.0)
+    track.x_est_mm = est_frac * track.length_mm()
+    mpos = (report_mm, 0.0, 0.0)
+    # The answer of a plain scan of every segment in path order, the earliest winning a tie.
+    want: float | None = None
+    for seg in track.path:
+        d, along = project(mpos, seg.start_mm, seg.end_mm)
+        x = seg.x0_mm + along
+        if d <= 0.008 and (want is None or abs(x - track.x_est_mm) < abs(want - track.x_est_mm)):
+            want = x
+    off = track.correct_estimate(mpos, 0.0)
+    assert off == (want is None)
+    if want is not None:
+        assert track.x_est_mm == pytest.approx(want, abs=1e-9)
+
+
+_COORD = st.floats(-50.0, 50.0, allow_nan=False)
+_POINT = st.tuples(_COORD, _COORD, _COORD)
+_SPM = st.tuples(*[st.sampled_from([10.0, 80.0, 250.0, 1000.0])] * 3)
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=_POINT, a=_POINT, b=_POINT, spm=_SPM)
+def test_nearest_in_steps_is_the_minimum_over_the_segment(p: Vec, a: Vec, b: Vec, spm: Vec) -> None:
+    steps, q = nearest_in_steps(p, a, b, spm)
+
+    def err(t: float) -> float:
+        return max(
+            abs(ai + (bi - ai) * t - pi) * k for ai, bi, pi, k in zip(a, b, p, spm, strict=True)
+        )
+
+    # q is on the segment and its error is the one returned ...
+    t_q = max(
+        ((qi - ai) / (bi - ai) for qi, ai, bi in zip(q, a, b, strict=True) if bi != ai), default=0.0
+    )
+    assert 0.0 <= t_q <= 1.0 + 1e-12
+    assert err(t_q) == pytest.approx(steps, rel=1e-9, abs=1e-9)
+    # ... and no point of a fine sweep along it does better.
+    assert all(err(i / 2000) >= steps - 1e-9 for i in range(2001))
+
+
+def test_tracking_error_after_a_cancel_finds_the_nearest_segment_of_a_long_path() -> None:
+    # A zigzag of 40 segments; the machine stopped near the 23rd, the others are skipped by
+    # their bounding boxes or lose to it.
+    track = tracker()
+    for k in range(40):
+        add(track, (float(k + 1), 2.0 * (k % 2), 0.0))
+    stop = (22.5, 0.999, 0.0)
+    want = min(nearest_in_steps(stop, seg.start_mm, seg.end_mm, SPM)[0] for seg in track.path)
+    got_mm, got_steps = track.tracking_error(stop, cancelled=True)
+    assert got_steps == pytest.approx(want)
+    # 0.001 mm off the line in Y, which falls 2 mm per mm of X: best shared as 1/3 of it.
+    assert got_steps == pytest.approx(0.001 * 250 / 3, abs=1e-6)
+    assert got_mm < 0.001
 
 
 @pytest.mark.parametrize(

@@ -365,16 +365,35 @@ class PathTracker:
         if not self.path or not self.moving_since_ack:
             return False
         tolerance_mm = 2.0 / min(self.steps_per_mm) + 1e-6
+        path = self.path
+        x_est = self.x_est_mm
         best: float | None = None
-        for seg in self.path:
+        best_gap = math.inf
+
+        def on(seg: PathSeg) -> float | None:
+            """Where along the path the report lies on seg, or None if it lies off it."""
             if _outside_box(mpos, seg.start_mm, seg.end_mm, tolerance_mm):
-                continue  # farther than the tolerance from the segment's box, so from it too
+                return None  # farther than the tolerance from the segment's box, so from it too
             d, along = project(mpos, seg.start_mm, seg.end_mm)
-            if d > tolerance_mm:
-                continue
-            x = seg.x0_mm + along
-            if best is None or abs(x - self.x_est_mm) < abs(best - self.x_est_mm):
-                best = x
+            return None if d > tolerance_mm else seg.x0_mm + along
+
+        # Outward from the estimate's segment, each way only as far as a nearer answer could
+        # lie: a report normally sits beside the estimate, so a few segments are tried, not all.
+        # The earliest segment wins a tie, as in a scan in path order.
+        first = min(max(bisect.bisect_right(path, x_est, key=_X0) - 1, 0), len(path) - 1)
+        for seg in itertools.islice(path, first, None):
+            if seg.x0_mm - x_est > best_gap:
+                break
+            x = on(seg)
+            if x is not None and abs(x - x_est) < best_gap:
+                best, best_gap = x, abs(x - x_est)
+        for i in range(first - 1, -1, -1):
+            seg = path[i]
+            if x_est - seg.x1_mm > best_gap:
+                break
+            x = on(seg)
+            if x is not None and abs(x - x_est) <= best_gap:
+                best, best_gap = x, abs(x - x_est)
         if best is None:
             return True
         # The report was built before its bytes crossed the wire: move it forward by that age.
@@ -420,6 +439,9 @@ class PathTracker:
             return math.dist(ref, mpos), steps
         best_steps, best_ref = math.inf, mpos
         for seg in self.path:
+            # No point of a segment is nearer than its bounding box: most are skipped unsolved.
+            if _box_steps(mpos, seg.start_mm, seg.end_mm, spm) >= best_steps:
+                continue
             steps, ref = nearest_in_steps(mpos, seg.start_mm, seg.end_mm, spm)
             if steps < best_steps:
                 best_steps, best_ref = steps, ref
@@ -470,6 +492,17 @@ def _outside_box(p: Vec, a: Vec, b: Vec, margin_mm: float) -> bool:
     return False
 
 
+def _box_steps(p: Vec, a: Vec, b: Vec, steps_per_mm: Vec) -> float:
+    """How far p lies outside the axis-aligned box around segment ab, in steps of the worst
+    axis: a lower bound of nearest_in_steps."""
+    out = 0.0
+    for pi, ai, bi, k in zip(p, a, b, steps_per_mm, strict=True):
+        lo, hi = (ai, bi) if ai <= bi else (bi, ai)
+        gap = lo - pi if pi < lo else pi - hi if pi > hi else 0.0
+        out = max(out, gap * k)
+    return out
+
+
 def project(p: Vec, a: Vec, b: Vec) -> tuple[float, float]:
     """Distance from p to segment ab, and how far along ab the closest point lies."""
     ab = tuple(y - x for x, y in zip(a, b, strict=True))
@@ -485,21 +518,32 @@ def project(p: Vec, a: Vec, b: Vec) -> tuple[float, float]:
 def nearest_in_steps(p: Vec, a: Vec, b: Vec, steps_per_mm: Vec) -> tuple[float, Vec]:
     """The point of segment ab nearest to p when distance is the worst axis counted in steps.
 
-    The firmware rounds each axis to its own step grid, so "within one step" is per axis. The
-    distance along the segment is convex in t; a ternary search finds its minimum.
+    The firmware rounds each axis to its own step grid, so "within one step" is per axis. Along
+    the segment (q = a + (b - a)·t) the distance is max_i k_i·|a_i - p_i + (b_i - a_i)·t|, the
+    upper envelope of 2n lines in t: convex and piecewise linear, so its minimum on [0, 1] lies
+    at an end or where two of those lines cross. Trying every crossing is exact and costs a few
+    dozen multiplications for three axes (a status at a stop is checked against the whole path).
     """
+    lines = []  # (slope, value at t = 0) of +-k_i·(a_i - p_i + d_i·t)
+    for pi, ai, bi, k in zip(p, a, b, steps_per_mm, strict=True):
+        slope, icpt = k * (bi - ai), k * (ai - pi)
+        lines.append((slope, icpt))
+        lines.append((-slope, -icpt))
 
-    def at(t: float) -> tuple[float, Vec]:
-        q = tuple(ai + (bi - ai) * t for ai, bi in zip(a, b, strict=True))
-        err = max(abs(qi - pi) * k for qi, pi, k in zip(q, p, steps_per_mm, strict=True))
-        return err, q
+    def err_at(t: float) -> float:
+        return max(m * t + c for m, c in lines)
 
-    lo, hi = 0.0, 1.0
-    for _ in range(60):
-        m1 = lo + (hi - lo) / 3
-        m2 = hi - (hi - lo) / 3
-        if at(m1)[0] <= at(m2)[0]:
-            hi = m2
-        else:
-            lo = m1
-    return at((lo + hi) / 2)
+    best_t, best = 0.0, err_at(0.0)
+    end = err_at(1.0)
+    if end < best:
+        best_t, best = 1.0, end
+    for i, (m1, c1) in enumerate(lines):
+        for m2, c2 in lines[i + 1 :]:
+            if m1 != m2:
+                t = (c2 - c1) / (m1 - m2)
+                if 0.0 < t < 1.0:
+                    e = err_at(t)
+                    if e < best:
+                        best_t, best = t, e
+    q = tuple(ai + (bi - ai) * best_t for ai, bi in zip(a, b, strict=True))
+    return best, q
