@@ -239,6 +239,8 @@ class _MalformedLineError(CoreError):
 
 def parse_response(line: bytes | str) -> Response:
     """Parse one line from the controller; any input at all yields a Response, never an error."""
+    if line == b"ok":
+        return _OK  # the reply to almost every line, framed without its line end
     raw = _as_bytes(line)
     try:
         text = raw.decode("utf-8")
@@ -252,6 +254,9 @@ def parse_response(line: bytes | str) -> Response:
     except Exception as exc:
         # The contract is "never raises": a parser bug must cost one log line, not a running jog.
         return Unparsed(raw, f"parser fault: {type(exc).__name__}")
+
+
+_OK = Ok()
 
 
 def _as_bytes(line: bytes | str) -> bytes:

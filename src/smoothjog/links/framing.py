@@ -39,7 +39,20 @@ class LineFramer:
 
     def feed(self, data: bytes) -> list[bytes]:
         """Take the next bytes of the stream; return every line they complete, in order."""
-        lines: list[bytes] = []
+        if (
+            data.endswith(b"\r\n")
+            and not self._partial
+            and not self._skip_lf
+            and not self._discarding
+        ):
+            # The usual read: whole lines in Grbl's own `\r\n`, nothing held over from before.
+            lines = data[:-2].split(b"\r\n")
+            if all(
+                b"\r" not in line and b"\n" not in line and len(line) <= self.max_line_bytes
+                for line in lines
+            ):
+                return lines
+        lines = []
         start = 0
         if self._skip_lf and data:
             if data[:1] == b"\n":
