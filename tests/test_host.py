@@ -12,6 +12,7 @@ import pytest
 from smoothjog.core.errors import LinkError
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
 from smoothjog.core.jogger import EngineEvent
+from smoothjog.core.responses import Banner
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware
@@ -210,6 +211,42 @@ async def test_a_controller_reset_mid_session_is_survived() -> None:
         assert stops
         assert stops[-1].tracked_error_steps <= 1.0
         assert not [e for e in events if e.kind == "fault" and "reset" not in e.text]
+
+
+async def test_a_controller_held_right_after_a_reset_keeps_the_session_until_resumed() -> None:
+    """Ctrl-X, then someone's `!` at once: the settings cannot be read while the controller is
+    in Hold. The session stays, says why, and reads them once someone resumes the controller."""
+    async with open_session() as (session, link, events):
+        link.firmware.settings.force(110, 4000.0)
+
+        def hold_after_the_banner(resp: object, _now_s: float) -> None:
+            if isinstance(resp, Banner):
+                link.send_realtime(b"!")  # on the wire before the re-handshake's first line
+
+        session.add_line_listener(hold_after_the_banner)
+        link.send_realtime(b"\x18")
+        await eventually(
+            lambda: any("restarted and is in Hold" in e.text for e in events),
+            "the message that the held controller reads no line",
+        )
+        assert session.error is None
+        assert session.link_error is None
+        assert session.rehandshaking
+        assert link.firmware.status_state() == "Hold:0"
+        assert not session.view().can_jog
+        await asyncio.sleep(0.6)  # it waits, and asks again and again, without giving up
+        assert session.error is None
+        assert session.rehandshaking
+
+        link.send_realtime(b"~")  # the user resumes it
+        await eventually(lambda: not session.rehandshaking, "the re-handshake after the resume")
+        assert session.engine is not None
+        assert session.engine.limits.max_rate_mm_min[0] == 4000.0
+        assert session.error is None
+        session.set_intent(StepIntent("X", -2.0, 0.5))
+        await eventually(session.busy, "the step starting", timeout_s=1.0)
+        await session.wait_idle(WAIT_S)
+        assert link.firmware.mpos_mm() == (-3.0, -1.0, -1.0)
 
 
 @pytest.mark.parametrize("firmware", ["grbl", "grblhal", "fluidnc"])

@@ -85,6 +85,14 @@ class QueryLink(Protocol):
         """Where the controller is, for messages."""
 
 
+class ControllerSuspendedError(ConnectError):
+    """The controller is in Hold, Door or Sleep and reads no line until someone resumes it."""
+
+    def __init__(self, message: str, state: str) -> None:
+        super().__init__(message)
+        self.state = state
+
+
 class ControllerResetError(ConnectError):
     """A banner arrived while a query was waiting: the controller reset and lost the query."""
 
@@ -233,14 +241,15 @@ class Querier:
             return self._suspended(status)
         return self._no_answer(line)
 
-    def _suspended(self, status: StatusReport) -> ConnectError:
+    def _suspended(self, status: StatusReport) -> ControllerSuspendedError:
         """The error for a controller in a state where it reads no line."""
         # A feed hold (someone's `!` or a hold button), an open door or sleep: Grbl's main loop
         # reads no line until it is resumed (firmware-facts §3.2, §3.3).
         shown = status.state if status.substate is None else f"{status.state}:{status.substate}"
-        return ConnectError(
+        return ControllerSuspendedError(
             f"{self.link.describe()} reports {shown} and reads no line in that state:"
-            " resume it (cycle start, ~) or reset it, then connect again"
+            " resume it (cycle start, ~) or reset it, then connect again",
+            shown,
         )
 
     def _no_answer(self, line: str) -> ConnectError:

@@ -42,7 +42,7 @@ from smoothjog.core.jogger import (
 )
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL, RESET
+from smoothjog.core.realtime import JOG_CANCEL, RESET, STATUS_QUERY
 from smoothjog.core.responses import (
     Banner,
     BuildOptions,
@@ -60,10 +60,14 @@ from smoothjog.core.responses import (
     VersionInfo,
     parse_response,
 )
-from smoothjog.handshake import handshake
+from smoothjog.handshake import SUSPENDED_STATES, ControllerSuspendedError, handshake
 from smoothjog.links.base import Link, encode_line
 
 logger = logging.getLogger(__name__)
+
+#: While a controller that restarted is held (Hold, Door, Sleep), how often to ask whether
+#: someone resumed it.
+RESUME_POLL_S = 0.25
 
 #: States in which a controller with nothing queued is at rest as far as jogging goes.
 REST_STATES = frozenset({"Idle", "Alarm", "Door", "Hold"})
@@ -665,18 +669,60 @@ class Host:
         """The controller reset mid-session: read its settings again before any jog."""
 
         async def run() -> None:
+            told = False
             try:
-                await self._handshake()
+                while True:
+                    try:
+                        await self._handshake()
+                        break
+                    except ControllerSuspendedError as exc:
+                        # Someone held the controller just after it restarted (a hold button,
+                        # another program's `!`, a door). It reads no line until resumed, and
+                        # resuming is for a person to do, never smoothjog: stay connected, say
+                        # so once, and read the settings once it runs again.
+                        if not told:
+                            told = True
+                            self._tell(
+                                "fault",
+                                f"the controller restarted and is in {exc.state}: it reads no"
+                                " line until it is resumed",
+                                "resume it (cycle start, ~) or reset it; smoothjog reads its"
+                                " settings again then, and jogs after that",
+                            )
+                        await self._until_resumed()
                 self._engine().reset_machine(EngineLimits.from_model(self.model, self.keepouts))
             except SmoothjogError as exc:  # e.g. a controller that keeps resetting
                 self._fail(exc)
             finally:
-                self._rehandshake_task = None
+                if self._rehandshake_task is asyncio.current_task():
+                    self._rehandshake_task = None
                 self._poke()
 
+        if self._rehandshake_task is not None:
+            # Another reset while waiting for a held controller: read the settings afresh.
+            self._rehandshake_task.cancel()
         self._rehandshake_task = asyncio.get_running_loop().create_task(
             run(), name="smoothjog-rehandshake"
         )
+
+    async def _until_resumed(self) -> None:
+        """Ask `?` until the controller reports a state other than Hold, Door or Sleep."""
+        while True:
+            await asyncio.sleep(RESUME_POLL_S)
+            if self.link_error is not None:
+                raise self.link_error
+            if self.model.state not in SUSPENDED_STATES:
+                return
+            self.send_realtime(HANDSHAKE, STATUS_QUERY)
+
+    def _tell(self, kind: str, text: str, hint: str = "") -> None:
+        """Tell the user something the host itself found, on the engine's event path."""
+        engine = self.engine
+        if engine is None:
+            logger.warning("%s%s", text, f" ({hint})" if hint else "")
+            return
+        engine.events.append(EngineEvent(self.now_s(), kind, text, hint))
+        self._flush_events()
 
     async def wait_lost(self) -> None:
         """Return once the link is lost or the host failed (link_error is then set)."""
