@@ -74,9 +74,9 @@ def phase_link(link: LinkModel, k: int) -> LinkModel:
 def cycle_on_link_s(factory: Method, link: LinkModel) -> float:
     """The host's send cycle on this link, to spread the releases over all of its phases.
 
-    smoothjog's blocks grow with a slow wire (a jog line must cross it within 60 % of a block:
-    about 42 ms at 9600 baud) and a long round trip; phases spread over the ideal wire's 10.5 ms
-    would sample a quarter of such a cycle. Measured as the mean time between the jog lines sent
+    smoothjog's blocks grow with a slow wire (about 78 ms at 9600 baud, see docs/jogging.md)
+    and a long round trip; phases spread over the ideal wire's 10.5 ms would sample a small
+    part of such a cycle. Measured as the mean time between the jog lines sent
     in a second of full-speed hold; a reference method keeps its own fixed cycle.
     """
     vs, _t0 = sc._session(factory, LINK_MACHINE, "grbl", link)

@@ -80,8 +80,8 @@ def test_the_table_says_whether_the_s1_ratio_meets_its_target() -> None:
 
 
 def test_the_releases_are_spread_over_the_send_cycle_of_each_link() -> None:
-    # At 9600 baud a jog line takes 25 ms to cross, so smoothjog's blocks are about 40 ms:
-    # phases spread over the ideal wire's 10.5 ms would sample a quarter of that cycle.
+    # At 9600 baud a jog line takes 25 ms to cross, so smoothjog's blocks are about 78 ms:
+    # phases spread over the ideal wire's 10.5 ms would sample a small part of that cycle.
     shipped = links.hosts()[1].factory
     ideal_s = links.cycle_on_link_s(shipped, LINK_MODELS["ideal"])
     slow_s = links.cycle_on_link_s(shipped, LINK_MODELS["9600"])

@@ -6,7 +6,7 @@ import re
 
 from smoothjog.core import increments as inc
 from smoothjog.core.intents import ContinuousIntent
-from smoothjog.core.jogger import JogTuning, SendRealtime
+from smoothjog.core.jogger import LINE_SHARE, RELEASE_WAIT_S, JogTuning, SendRealtime
 from smoothjog.core.realtime import STATUS_QUERY
 from tests.core.engine_harness import START_MPOS, EngineHarness
 
@@ -44,8 +44,11 @@ def test_at_9600_baud_blocks_are_long_enough_for_the_wire_and_polls_leave_it_roo
     fast_mm = _increment_mm(fast.jog_lines()[-2])
     slow_mm = _increment_mm(slow.jog_lines()[-2])
     line_s = (len(slow.jog_lines()[-2]) + 1) * 10 / 9600
-    # A line takes line_s on the wire: a block must last well over that at full speed.
-    assert slow_mm / V_MM_S >= line_s / 0.6 - 1e-9
+    # A line takes line_s on the wire: a block must last well over that at full speed, and so
+    # long that a release expects to wait at most RELEASE_WAIT_S for a line still crossing.
+    assert slow_mm / V_MM_S >= line_s / LINE_SHARE - 1e-9
+    assert slow_mm / V_MM_S >= line_s * line_s / (2 * RELEASE_WAIT_S) - 1e-9
+    assert slow_mm / V_MM_S > 0.075  # 25 ms lines: blocks of 78 ms
     assert slow_mm > 2 * fast_mm
     queries = [i for i, o in enumerate(slow.sent) if getattr(o, "byte", None) == STATUS_QUERY]
     assert len(queries) <= 1.0 / 0.15 + 1  # 50-byte reports at 9600 baud: not 20 a second

@@ -131,6 +131,9 @@ STALL_MIN_S = 0.020
 RTT_CAP_S = 0.5
 #: Share of the wire's throughput the engine's own lines may take (the rest: `?`, other owners).
 LINE_SHARE = 0.6
+#: The longest wait a release may expect, on average, for the `ok` of a jog line still on the
+#: wire: at 9600 baud (25 ms per line) blocks of 78 ms; at 38400 and faster it never binds.
+RELEASE_WAIT_S = 0.004
 #: Share of the return wire the status reports may take (the rest: replies, messages).
 REPORT_SHARE = 0.3
 #: Bytes of a typical jog line with its newline, for sizing before the first one is written.
@@ -999,8 +1002,13 @@ class Jogger:
         # (a 9600 baud wire takes 25 ms for a jog line), and the lines the RX buffer holds
         # must span the round trip until their replies make room for more.
         rx_lines = max(self.limits.rx_buffer_bytes // self._line_bytes - 1, 1)
+        line_s = self._line_bytes * self._byte_s
         block_s = max(
-            self._line_bytes * self._byte_s / LINE_SHARE,
+            line_s / LINE_SHARE,
+            # A release waits for the `ok` of a line still crossing the wire before its cancel
+            # (firmware-facts §3.1). A line is on its way line_s / block_s of the time and then
+            # has line_s / 2 left on average: long blocks keep that expected wait short.
+            line_s * line_s / (2.0 * RELEASE_WAIT_S),
             self._rtt_hi_s / rx_lines,
             self.tuning.dt_floor_s,
             inc.min_block_s(move.speed_mm_s, move.accel_mm_s2, self.limits.planner_blocks),
