@@ -4,22 +4,24 @@ grblHAL / FluidNC differences of firmware-facts §7."""
 from __future__ import annotations
 
 import itertools
+import math
 
 import pytest
 
+from smoothjog.sim.firmware import EXEC_CYCLE_STOP
 from tests.sim.rigtools import Host, field, mpos
 
 JOG_LINE = "$J=G91X1F300\n"
 
 
-def stream_jogs(host: Host, count: int, rx_size: int = 128) -> int:
+def stream_jogs(host: Host, count: int, rx_size: int = 128, jog: str = JOG_LINE) -> int:
     """Stream count jogs with character counting (firmware-facts §5.1); returns the oks received."""
     outstanding: list[int] = []
     sent = acked = 0
     while sent < count:
-        while sent < count and sum(outstanding) + len(JOG_LINE) <= rx_size:
-            host.send(JOG_LINE)
-            outstanding.append(len(JOG_LINE))
+        while sent < count and sum(outstanding) + len(jog) <= rx_size:
+            host.send(jog)
+            outstanding.append(len(jog))
             sent += 1
         for line in host.until(lambda x: x == "ok", 5.0):
             if line == "ok":
@@ -198,6 +200,31 @@ def test_reset_while_jogging_alarm_pause_stray_ok_banner() -> None:
     assert host.run(1.0) == []  # the lines that were waiting in RX are lost
     true_x = host.rig.trace[-1].end_mm[0]
     assert mpos(report)[0] == pytest.approx(true_x, abs=0.005)  # MPos kept
+
+
+def test_a_reset_during_a_cancels_step_idle_delay_runs_only_the_prepared_segments() -> None:
+    # The planner full and a line held in mc_line; 0x85, and a reset while st_reset's $1 delay
+    # ends the cancel. mc_line then plans and starts that line before its checkpoint sees the
+    # reset; ALARM:3's 500 ms pause runs in the main program, which alone prepares segments, so
+    # the steppers run the few already prepared (50 ms at most) and stop, not the whole pause.
+    host = Host(machine="hobby-router")  # soft limits -800..0, at -1: jog toward minus
+    stream_jogs(host, 25, jog="$J=G91X-2F600\n")
+    host.send(b"\x85")
+    while host.fw.motion.is_running():
+        host.run(0.001)
+    # The stepper ISR's st_go_idle delay first, then the cycle stop serviced, which ends the
+    # cancel with st_reset and its own delay of $1 (25 ms): strike inside that second one.
+    while host.fw._rt & EXEC_CYCLE_STOP:
+        host.run(0.001)
+    host.run(0.005)
+    host.send(b"\x18")
+    t_reset = host.now_s
+    lines = host.until(lambda x: x.startswith("[MSG:'$H'"), 2.0)
+    assert "ALARM:3" in lines
+    after = [seg for seg in host.rig.trace if seg.t0_s >= t_reset]
+    assert after, "the held line started after the reset (the race this test is about)"
+    assert after[-1].t1_s - after[0].t0_s <= 0.051
+    assert sum(math.dist(seg.start_mm, seg.end_mm) for seg in after) < 1.0
 
 
 def test_reset_in_idle_prints_only_the_banner() -> None:

@@ -928,6 +928,13 @@ class GrblFirmware:
             code, self._rt_alarm = self._rt_alarm, 0
             self.state = ALARM
             self._emit(now_s, f"ALARM:{code}")
+            if self.motion.is_running():
+                # Only one race leaves the steppers running here: a reset struck during a jog
+                # cancel's st_reset delay, and the line held in mc_line was planned and started
+                # before this checkpoint saw the reset. report_alarm_message's 500 ms delay runs
+                # in the main program, which alone refills the segment buffer (st_prep_buffer):
+                # the steppers run what is prepared, then stop (firmware-facts §3.4).
+                self.motion.starve()
             self._freeze(now_s, self.profile.alarm_pause_s)
             if code in (ALARM_HARD_LIMIT, ALARM_SOFT_LIMIT):
                 self._after_freeze = self._enter_critical_lock

@@ -158,6 +158,8 @@ class Motion:
         self._hold = False
         self._hold_done = False
         self._running = False
+        # The main program blocks in a delay and prepares no segment (see starve).
+        self._starved = False
         # The executing segment started at this time; _now_s is the last time advanced to.
         self._exec_start_s = 0.0
         self._now_s = 0.0
@@ -338,6 +340,7 @@ class Motion:
         """Begin executing the queued blocks (Grbl's cycle start); no-op while running or held."""
         if self._running or self._hold or not self._blocks:
             return
+        self._starved = False
         self._now_s = max(self._now_s, now_s)
         self._exec_start_s = self._now_s
         self._running = True
@@ -366,6 +369,7 @@ class Motion:
 
     def clear_after_stop(self) -> None:
         """Drop every block and segment; sync the planner to the machine (end of a jog cancel)."""
+        self._starved = False
         self._blocks.clear()
         self._segments.clear()
         self._prep_d_mm = 0.0
@@ -436,7 +440,14 @@ class Motion:
         self.trace.append(TraceSegment(self._exec_start_s, end_s, start_mm, end_mm))
 
     # ----------------------------------------------------------------- step preparer
+    def starve(self) -> None:
+        """The main program stops refilling the segment buffer (it blocks in a delay): the
+        steppers run the segments already prepared, then stop. Until the next cycle start."""
+        self._starved = True
+
     def _fill_segments(self) -> None:
+        if self._starved:
+            return
         segments = self._segments
         while len(segments) < self.segment_buffer:
             seg = self._prep_segment()
