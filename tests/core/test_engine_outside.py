@@ -9,7 +9,7 @@ anew, however often the held stick is re-sent. A pin that reads active all along
 from __future__ import annotations
 
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
-from smoothjog.core.jogger import Phase
+from smoothjog.core.jogger import JogTuning, Phase
 from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
 
 HELD = ContinuousIntent({"X": -1.0}, 1.0)
@@ -111,6 +111,48 @@ def test_a_jog_never_seen_at_speed_is_not_judged() -> None:
     h.run(0.2)
     h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(2000, 0))
     assert _outside_faults(h) == []
+
+
+def _fresh_slow_link_jog(rest_at_mm: float) -> tuple[EngineHarness, float]:
+    """A jog at 60 % just begun at 9600 baud (its first block long, none of it seen at speed),
+    reported at rest in Jog rest_at_mm along its path; returns the harness and the first
+    block's length."""
+    h = EngineHarness(tuning=JogTuning(byte_s=10 / 9600))
+    h.rest_at(START_MPOS)
+    h.intent(ContinuousIntent({"X": -1.0}, 0.6))
+    h.run(0.08)
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+    track = h.engine._track
+    first_mm = track.path[0].length_mm
+    h.status("Jog", track.point_at(rest_at_mm), fs=(0, 0))
+    return h, first_mm
+
+
+def test_a_fresh_jog_at_rest_inside_its_first_block_was_stopped_outside() -> None:
+    # A hold 0.1 s into a jog at 9600 baud: the run was never seen at speed, yet Grbl only
+    # rests at the end of what it planned (short of it by the committed segments). Unseen,
+    # the next line started the machine again and it ran 18 mm (fuzz).
+    h, first_mm = _fresh_slow_link_jog(1.0)
+    assert first_mm > 3.5  # long enough that a rest 1 mm in is far inside it
+    faults = _outside_faults(h)
+    assert faults, h.fault_texts()
+    assert "stood still" in faults[0]
+    assert h.engine.phase is Phase.STOPPING
+
+
+def test_a_fresh_jog_at_rest_at_its_start_or_braking_into_its_first_blocks_end_is_not_judged() -> (
+    None
+):
+    # At the start it has not moved yet; near the block's end its next line came late (a slow
+    # link) and the planner brakes for the end of what it holds: FS reaches 0 while the
+    # committed segments (2.5 mm from 50 mm/s) still run.
+    h, first_mm = _fresh_slow_link_jog(0.0)
+    assert h.fault_texts() == []
+    h, _ = _fresh_slow_link_jog(first_mm - 2.0)
+    assert h.fault_texts() == []
+    assert h.engine.phase is Phase.JOGGING
 
 
 def test_after_an_outside_stop_the_held_stick_does_not_move_the_machine_again() -> None:

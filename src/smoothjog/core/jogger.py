@@ -2027,11 +2027,12 @@ class Jogger:
         seg_mm_min = mm_s_to_mm_min(here.speed_mm_s) if here is not None else cmd_mm_min
         if feed is not None and feed >= 0.95 * min(cmd_mm_min, seg_mm_min):
             self._cruised = True
-        elif feed == 0.0 and self._cruised and asked_s is not None and acked_end_mm is not None:
-            # At rest in Jog with acknowledged path ahead, after this run was seen at speed:
-            # a turn never slows the planner to 0 (the engine stops for a reversal), and a
-            # queue that ran dry rests at its end, so wherever the estimate stands (by a
-            # junction, on a slide) only someone else's stop rests here. FS is the speed of
+        elif feed == 0.0 and asked_s is not None and acked_end_mm is not None:
+            # At rest in Jog with acknowledged path ahead (all of it once this run was seen at
+            # speed, else the block it rests on; see _rest_ahead_mm): a turn never slows the
+            # planner to 0 (the engine stops for a reversal), and a queue that ran dry rests
+            # at its end, so wherever the estimate stands (by a junction, on a slide) only
+            # someone else's stop rests here. FS is the speed of
             # the segments being prepared, which reaches 0 while the committed ones still
             # run: a queue braking for its end (an edge, a keep-out) may still be short of
             # it by what they cover over a lead of twice the committed time (the segment
@@ -2042,7 +2043,7 @@ class Jogger:
             # cover more (Grbl over a stalled Wi-Fi link rested 0.15 mm short at 250 mm/min
             # as its queue ran dry: a false alarm), but allowing v·t there hides a real 0x85
             # of a jog at 500 mm/min, which rests only a few tenths short.
-            rest_ahead_mm = acked_end_mm - self._track.x_est_mm
+            rest_ahead_mm = self._rest_ahead_mm(acked_end_mm, step_mm)
             v_mm_s = max(move.speed_mm_s, self._track.v_est_mm_s)
             lead_s = 2.0 * self.tuning.committed_s
             committed_mm = max(
@@ -2053,7 +2054,8 @@ class Jogger:
                 FS_LEAD_FLOOR_MM,
             )
             if (
-                rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
+                rest_ahead_mm is not None
+                and rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
                 and not self._near_a_junction_at_rest()
             ):
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
@@ -2103,6 +2105,31 @@ class Jogger:
         if lag_mm > allowed_mm + margin_mm:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
+
+    def _rest_ahead_mm(self, acked_end_mm: float, step_mm: float) -> float | None:
+        """How much path the planner surely held ahead of a machine reported at rest in Jog;
+        None when a rest there says nothing.
+
+        Once the run was seen at speed the planner holds every acknowledged jog. Before that
+        (a fresh jog still speeding up, or one whose replies came late), the lines planned so
+        far may have run out: the machine then brakes for a block's end, and only the rest of
+        the block it is on counts. A queue that runs dry rests at a block's end (short of it
+        by what the committed segments cover), never in the middle of a long one, and a
+        report at the run's start is a jog not yet moving. A machine that moved off the start
+        and rests far inside a block was stopped by someone else: a hold 0.1 s into a fresh
+        jog at 9600 baud left the next 13 mm line to start it again (18 mm ran, fuzz).
+        """
+        if self._cruised:
+            return acked_end_mm - self._track.x_est_mm
+        # Where the report put it (the estimate moves that on by the report's wire time, as if
+        # it still ran).
+        x_mm = self._track.x_reported_mm
+        if x_mm is None or x_mm <= max(OUTSIDE_LAG_MM, 3.0 * step_mm):
+            return None
+        here = self._track.seg_at(x_mm)
+        if here is None or not here.acked:
+            return None
+        return here.x1_mm - x_mm
 
     def _queue_runs_as_sent(self) -> bool:
         """True while jogging, and while smoothjog's own stop still waits for the oks before its
