@@ -31,7 +31,9 @@ from bench import measure
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
 from smoothjog.core.jogger import EngineEvent, Jogger, Phase
+from smoothjog.core.ledger import ENGINE
 from smoothjog.core.machine import KeepOut
+from smoothjog.core.realtime import JOG_CANCEL
 from smoothjog.core.responses import GcodeModes
 from smoothjog.core.stopper import StopPhase
 from smoothjog.sim.firmware import GrblFirmware
@@ -120,8 +122,9 @@ class FuzzReport:
     #: (a hold or cancel while it moved) or reset it.
     outside: dict[str, int] = field(default_factory=dict)
     outside_stops: int = 0
-    #: Outside holds and cancels sent while smoothjog's own cancel was already on the wire
-    #: (they stop nothing, so they are not outside stops).
+    #: Outside holds and cancels sent while smoothjog's own cancel was already on the wire,
+    #: or was decided and followed before the machine came to rest (the controller saw one
+    #: cancel either way), so they are not outside stops.
     outside_during_own_cancel: int = 0
     #: The longest motion of one such restart (lines left in the controller's buffer that ran
     #: before smoothjog's cancel caught them), mm.
@@ -195,6 +198,17 @@ class _Session:
         self.presses_s: list[float] = []
         #: Every outside event injected: when, which.
         self.outside_log: list[tuple[float, str]] = []
+        #: When the engine wrote each of its own jog cancels.
+        self.own_cancels_s: list[float] = []
+        host = self.vs.host
+        host_send_realtime = host.send_realtime
+
+        def send_realtime(owner: str, byte: bytes) -> None:
+            if owner == ENGINE and byte == JOG_CANCEL:
+                self.own_cancels_s.append(self.vs.now_s)
+            host_send_realtime(owner, byte)
+
+        host.send_realtime = send_realtime  # type: ignore[method-assign]
 
     def send_outside(self, byte: bytes) -> None:
         """Another sender puts byte on the wire now (the host knows nothing of it)."""
@@ -399,7 +413,9 @@ def _fault_sequence(
         report.faults.append(f"could not bring the machine back to Idle ({session.model.state})")
         return False
     _probe(session, report, events)
-    stops: list[tuple[float, str]] = []  # outside holds, cancels and resets: when, which
+    # Outside holds, cancels and resets: when, which, and whether smoothjog had already
+    # decided on a cancel of its own that was still waiting for a line's ok.
+    stops: list[tuple[float, str, bool]] = []
     for _ in range(rng.randint(1, 5)):
         intent = _random_intent(rng)
         try:
@@ -424,22 +440,28 @@ def _fault_sequence(
                 # (firmware-facts §3.1), and a press made before it may rightly go on.
                 report.outside_during_own_cancel += kind != "soft reset"
                 if kind == "soft reset":
-                    stops.append((vs.now_s, kind))
+                    stops.append((vs.now_s, kind, False))
                 session.send_outside(byte)
             else:
-                stops.append((vs.now_s, kind))
+                stops.append((vs.now_s, kind, _own_cancel_due(session.engine)))
                 session.send_outside(byte)
         vs.run_until(max(end_s, vs.now_s))
     start_checked = session.checked_upto
     # A host that never comes to rest is replaced (the operator restarts it), once checked.
     idle = _stop_and_check(session, report, idle_timeout_s=20.0)
     trace = vs.rig.trace
-    for t, kind in stops:
+    for t, kind, own_due in stops:
         # A hold or cancel of a machine at rest stops nothing; a reset stops it in any case.
         if kind != "soft reset" and not _moving_at(trace, t, start_checked):
             continue
-        report.outside_stops += 1
         rest = _rest_after(trace, t, start_checked)
+        if own_due and any(t < c <= rest for c in session.own_cancels_s):
+            # smoothjog's own 0x85 was decided and went out before that stop ended: the
+            # controller saw one cancel of one motion (a second 0x85 during a cancel changes
+            # nothing, firmware-facts §3.1), which no report can tell from smoothjog's own.
+            report.outside_during_own_cancel += 1
+            continue
+        report.outside_stops += 1
         later = [p for p in session.presses_s if p > t]
         until = later[0] if later else math.inf
         again = [
@@ -462,6 +484,16 @@ def _fault_sequence(
 
 def _fmt(p: tuple[float, ...]) -> str:
     return ",".join(f"{v:.3f}" for v in p)
+
+
+def _own_cancel_due(engine: Jogger) -> bool:
+    """True while the engine's own stop waits for a line's ok before the 0x85 it will send."""
+    stop = engine._stop
+    return (
+        engine.phase is Phase.STOPPING
+        and stop.phase is StopPhase.WAIT_ACKS
+        and bool(engine._track.path)
+    )
 
 
 def _own_cancel_sent(engine: Jogger) -> bool:
