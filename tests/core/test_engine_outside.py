@@ -447,6 +447,37 @@ def test_a_slow_jog_resting_short_of_the_end_is_an_outside_stop() -> None:
     assert _outside_faults(h), h.fault_texts()
 
 
+def _slow_run_out_at_the_soft_limit(short_mm: float) -> EngineHarness:
+    """A held X+ jog at 350 mm/min seen at speed, run until everything sent ends at the soft
+    limit, then reported at rest in Jog short_mm before that end."""
+    h = EngineHarness(soft_limits=True)
+    h.rest_at((-3.0, -1.0, -1.0))
+    h.intent(ContinuousIntent({"X": 1.0}, 0.07))
+    h.run(0.2)
+    h.status("Jog", _estimate_mm(h), fs=(0.07 * FEED_MM_MIN, 0))
+    track = h.engine._track
+    while h.path_end()[0] < -0.02:  # until everything sent ends at X's soft limit (0)
+        h.run(h.t + 0.002)
+    while track.length_mm() - track.x_est_mm > max(short_mm, 0.3):
+        h.run(h.t + 0.002)
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+    h.status("Jog", track.point_at(track.length_mm() - short_mm), fs=(0, 0))
+    return h
+
+
+def test_a_slow_jog_running_out_at_the_soft_limit_may_rest_its_committed_lead_short() -> None:
+    # FluidNC at 9600 baud reported FS:0 0.20 mm before the Y soft limit at 350 mm/min with no
+    # outside stop: the committed segments still ran at speed. Mid-path that rest would be
+    # someone else's stop (test_a_slow_jog_resting_short_of_the_end_is_an_outside_stop).
+    h = _slow_run_out_at_the_soft_limit(0.2)
+    assert _outside_faults(h) == []
+    # Further short than the committed segments at that speed can run: someone else's stop.
+    h = _slow_run_out_at_the_soft_limit(1.2)
+    assert _outside_faults(h), h.fault_texts()
+
+
 def test_a_rest_braking_into_a_reversal_from_a_faster_block_is_near_the_junction() -> None:
     # A Y- step at 25 mm/s with a slow Y+ jog queued behind it: the machine brakes into the
     # reversal from the step's speed, and FluidNC was seen at FS:0 0.41 mm before it (its

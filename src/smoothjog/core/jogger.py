@@ -2057,6 +2057,9 @@ class Jogger:
                 rest_ahead_mm is not None
                 and rest_ahead_mm > committed_mm + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
                 and not self._near_a_junction_at_rest()
+                and not self._running_out_at_a_boundary(
+                    committed_mm + v_mm_s * lead_s + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
+                )
             ):
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
@@ -2105,6 +2108,29 @@ class Jogger:
         if lag_mm > allowed_mm + margin_mm:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
+
+    def _running_out_at_a_boundary(self, within_mm: float) -> bool:
+        """True when everything sent ends at the envelope or a keep-out, within_mm ahead of the
+        estimate: the queue runs out there and no line will follow.
+
+        A slow jog's committed segments still run at its speed when FS reads 0, so it rests
+        short of that end by up to its speed times their lead: FluidNC at 9600 baud (1.5 mm
+        blocks at 350 mm/min) reported FS:0 0.20 mm before the Y soft limit with no outside
+        stop. Only at such an end is that allowed; mid-path it would hide a real 0x85 of a slow
+        jog, which rests only a few tenths short.
+        """
+        path = self._track.path
+        if not path or self._track.length_mm() - self._track.x_est_mm > within_mm:
+            return False
+        last = path[-1]
+        if last.length_mm <= 0.0:
+            return False
+        ray = last.unit_vec or tuple(
+            (e - s) / last.length_mm for e, s in zip(last.end_mm, last.start_mm, strict=True)
+        )
+        room_mm = self._room_along(last.end_mm, ray)[0]
+        # The last increments stop short of the edge by what rounding leaves (2 steps seen).
+        return room_mm <= 4.0 / min(self.limits.steps_per_mm)
 
     def _rest_ahead_mm(self, acked_end_mm: float, step_mm: float) -> float | None:
         """How much path the planner surely held ahead of a machine reported at rest in Jog;
