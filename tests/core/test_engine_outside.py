@@ -328,6 +328,40 @@ def test_a_turn_near_a_keep_out_waits_for_a_report_of_the_machine_at_the_corner(
     assert not h.engine._ghost_clear(across)
 
 
+def test_a_line_behind_unanswered_ones_is_checked_from_where_they_would_take_it() -> None:
+    # X+Y+ begun and at once reversed toward a zone: a hold that cuts the X+ line short leaves
+    # the X-Y- lines not yet parsed to run one after another from where it stopped, so the
+    # next one ends that much further X- (2 mm into the vise in the fuzz, FluidNC over Wi-Fi).
+    from smoothjog.core.machine import KeepOut
+    from smoothjog.core.tracker import PathSeg
+
+    zone = KeepOut("vise", (-420.0, -420.0, -100.0), (-380.0, -380.0, 0.0))
+    h = EngineHarness(keepouts=(zone,))
+    start = (-377.0, -413.6, -32.0)
+    h.rest_at(start)
+    h.intent(ContinuousIntent({"X": -1.0, "Y": -1.0}, 1.0))
+    h.poll()
+    track = h.engine._track
+    track.path.clear()
+    track.end_mm = start
+    turn = (-373.8, -410.4, -32.0)
+    track.append(PathSeg(start, turn, 4.525, 50.0, 500.0, 0.0))
+    track.path[0].acked = True
+    back = (-0.9148, -0.9148, 0.0)
+    here = turn
+    for _ in range(5):  # sent, none answered yet
+        end = tuple(p + d for p, d in zip(here, back, strict=True))
+        track.append(PathSeg(here, end, 1.2937, 118.0, 500.0, track.length_mm()))
+        here = end
+    track.x_est_mm = track.x_reported_mm = 0.0
+    step = (-0.7254, -0.7254, 0.0)  # ends at X -379.10: outside the zone, as planned
+    assert here[0] + step[0] > -380.0
+    assert not h.engine._ghost_clear(step)
+    for seg in track.path:  # once they are answered they are planned: a hold throws them away
+        seg.acked = True
+    assert h.engine._ghost_clear(step)
+
+
 def _suspended(
     h: EngineHarness,
     reports: int,

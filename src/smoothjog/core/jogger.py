@@ -1239,23 +1239,40 @@ class Jogger:
             (tuple(v - grow for v in zone.min_mm), tuple(v + grow for v in zone.max_mm))
             for zone in self.limits.keepouts
         ]
+        # The lines sent and not yet answered may be among those left unparsed: they run
+        # first, one after another from the stopping point, so this line then starts that
+        # much further on (after a reversal, further back: a hold that cut an X+ line short
+        # let the X- lines behind it run 2 mm further X- and into the vise, fuzz). Each
+        # count of them is an offset of the stopping point.
+        offsets: list[Vec] = [tuple(0.0 for _ in deltas)]
+        for seg in reversed(track.path):
+            if seg.acked:
+                break
+            offsets.append(
+                tuple(
+                    o + e - b for o, e, b in zip(offsets[-1], seg.end_mm, seg.start_mm, strict=True)
+                )
+            )
         # The path behind the machine (kept for late reports) is skipped by bisection: this
         # runs for every line sent near a zone.
         first = track.seg_index_at(x_mm) or 0
         for seg in itertools.islice(track.path, first, None):
             if seg.x0_mm + seg.length_mm <= x_mm:
                 continue
-            a = track.point_at(x_mm) if seg.x0_mm < x_mm else seg.start_mm
-            b = seg.end_mm
-            for lo, hi in zones:
-                # Most pieces are nowhere near a zone: their sweep's bounding box tells.
-                if any(
-                    min(ai, bi) + min(di, 0.0) >= h or max(ai, bi) + max(di, 0.0) <= lw
-                    for ai, bi, di, lw, h in zip(a, b, deltas, lo, hi, strict=False)
-                ):
-                    continue
-                if inc.sweep_enters_box(a, b, deltas, lo, hi):
-                    return False
+            a0 = track.point_at(x_mm) if seg.x0_mm < x_mm else seg.start_mm
+            b0 = seg.end_mm
+            for offset in offsets:
+                a = tuple(v + o for v, o in zip(a0, offset, strict=True))
+                b = tuple(v + o for v, o in zip(b0, offset, strict=True))
+                for lo, hi in zones:
+                    # Most pieces are nowhere near a zone: their sweep's bounding box tells.
+                    if any(
+                        min(ai, bi) + min(di, 0.0) >= h or max(ai, bi) + max(di, 0.0) <= lw
+                        for ai, bi, di, lw, h in zip(a, b, deltas, lo, hi, strict=False)
+                    ):
+                        continue
+                    if inc.sweep_enters_box(a, b, deltas, lo, hi):
+                        return False
         return True
 
     def _room_along(self, start: Vec, ray: Vec) -> tuple[float, str]:
