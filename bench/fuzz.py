@@ -126,6 +126,9 @@ class FuzzReport:
     #: or was decided and followed before the machine came to rest (the controller saw one
     #: cancel either way), so they are not outside stops.
     outside_during_own_cancel: int = 0
+    #: Outside holds and cancels that struck a machine braking into the end of everything
+    #: smoothjog had sent, where it then rested anyway (not outside stops either).
+    outside_stopped_nothing: int = 0
     #: The longest motion of one such restart (lines left in the controller's buffer that ran
     #: before smoothjog's cancel caught them), mm.
     worst_restart_mm: float = 0.0
@@ -413,9 +416,10 @@ def _fault_sequence(
         report.faults.append(f"could not bring the machine back to Idle ({session.model.state})")
         return False
     _probe(session, report, events)
-    # Outside holds, cancels and resets: when, which, and whether smoothjog had already
-    # decided on a cancel of its own that was still waiting for a line's ok.
-    stops: list[tuple[float, str, bool]] = []
+    # Outside holds, cancels and resets: when, which, whether smoothjog had already decided
+    # on a cancel of its own that was still waiting for a line's ok, and where everything it
+    # had sent ends when no more will follow (it was stopping or letting the queue run out).
+    stops: list[tuple[float, str, bool, tuple[float, ...] | None]] = []
     for _ in range(rng.randint(1, 5)):
         intent = _random_intent(rng)
         try:
@@ -440,21 +444,34 @@ def _fault_sequence(
                 # (firmware-facts §3.1), and a press made before it may rightly go on.
                 report.outside_during_own_cancel += kind != "soft reset"
                 if kind == "soft reset":
-                    stops.append((vs.now_s, kind, False))
+                    stops.append((vs.now_s, kind, False, None))
                 session.send_outside(byte)
             else:
-                stops.append((vs.now_s, kind, _own_cancel_due(session.engine)))
+                engine = session.engine
+                stops.append((vs.now_s, kind, _own_cancel_due(engine), _final_end(engine)))
                 session.send_outside(byte)
         vs.run_until(max(end_s, vs.now_s))
     start_checked = session.checked_upto
     # A host that never comes to rest is replaced (the operator restarts it), once checked.
     idle = _stop_and_check(session, report, idle_timeout_s=20.0)
     trace = vs.rig.trace
-    for t, kind, own_due in stops:
+    steps_per_mm = session.engine.limits.steps_per_mm
+    for t, kind, own_due, final_end in stops:
         # A hold or cancel of a machine at rest stops nothing; a reset stops it in any case.
         if kind != "soft reset" and not _moving_at(trace, t, start_checked):
             continue
         rest = _rest_after(trace, t, start_checked)
+        if final_end is not None:
+            at_rest = measure.position_at(trace, rest)
+            if all(
+                abs(r - e) * k <= 1.0 + 1e-9
+                for r, e, k in zip(at_rest, final_end, steps_per_mm, strict=False)
+            ):
+                # It struck a machine braking into the end of all smoothjog had sent, which
+                # then rested there anyway: it stopped nothing that anyone could see, and a
+                # press made before it may rightly go on.
+                report.outside_stopped_nothing += 1
+                continue
         if own_due and any(t < c <= rest for c in session.own_cancels_s):
             # smoothjog's own 0x85 was decided and went out before that stop ended: the
             # controller saw one cancel of one motion (a second 0x85 during a cancel changes
@@ -484,6 +501,14 @@ def _fault_sequence(
 
 def _fmt(p: tuple[float, ...]) -> str:
     return ",".join(f"{v:.3f}" for v in p)
+
+
+def _final_end(engine: Jogger) -> tuple[float, ...] | None:
+    """Where the engine's path ends while it sends no more (stopping, or letting it run out)."""
+    track = engine._track
+    if engine.phase in (Phase.STOPPING, Phase.SETTLING) and track.path:
+        return track.end_mm
+    return None
 
 
 def _own_cancel_due(engine: Jogger) -> bool:
@@ -648,7 +673,7 @@ def main(argv: list[str] | None = None) -> int:
             "| firmware | link | sequences | stops | ghost jogs | restarts after outside stop"
             " (longest, mm) | wedged | error:15 | envelope | keep-out | stops > 1 step (worst)"
             " | stops on a wrong report | stops after an outside stop (not judged) | never idle"
-            " | crashes | outside events (stops; behind smoothjog's own cancel)"
+            " | crashes | outside events (stops; with smoothjog's own cancel; stopped nothing)"
             " | bytes lost / flipped | faults reported"
             " | wall s |"
         )
@@ -675,7 +700,7 @@ def main(argv: list[str] | None = None) -> int:
                     f"{r.stops_over_one_step} ({r.worst_tracking_steps:.2f}) | "
                     f"{r.stops_on_a_wrong_report} | {r.stops_after_outside} | {r.never_idle} | "
                     f"{r.crashes} | {sum(r.outside.values())} ({r.outside_stops}; "
-                    f"{r.outside_during_own_cancel}) | "
+                    f"{r.outside_during_own_cancel}; {r.outside_stopped_nothing}) | "
                     f"{lost} / {flipped} | {r.faults_reported} | {wall} |",
                     flush=True,
                 )
