@@ -30,12 +30,13 @@ from dataclasses import dataclass, field
 from bench import measure
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineEvent, Jogger, Phase
+from smoothjog.core.jogger import EngineEvent, Jogger, Output, Phase
 from smoothjog.core.ledger import ENGINE
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.realtime import JOG_CANCEL
 from smoothjog.core.responses import GcodeModes
 from smoothjog.core.stopper import StopPhase
+from smoothjog.core.tracker import PathSeg
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import TraceSegment
 from smoothjog.sim.profiles import get_firmware_profile
@@ -203,6 +204,18 @@ class _Session:
         self.outside_log: list[tuple[float, str]] = []
         #: When the engine wrote each of its own jog cancels.
         self.own_cancels_s: list[float] = []
+        #: When the engine wrote each of its own jog lines.
+        self.own_jogs_s: list[float] = []
+        engine_send = engine._send
+
+        def send(
+            line: str, kind: str, now_s: float, out: list[Output], seg: PathSeg | None = None
+        ) -> None:
+            if kind == "jog":
+                self.own_jogs_s.append(now_s)
+            engine_send(line, kind, now_s, out, seg)
+
+        engine._send = send  # type: ignore[method-assign]
         host = self.vs.host
         host_send_realtime = host.send_realtime
 
@@ -448,7 +461,7 @@ def _fault_sequence(
                 session.send_outside(byte)
             else:
                 engine = session.engine
-                stops.append((vs.now_s, kind, _own_cancel_due(engine), _final_end(engine)))
+                stops.append((vs.now_s, kind, _own_cancel_due(engine), _path_end(engine)))
                 session.send_outside(byte)
         vs.run_until(max(end_s, vs.now_s))
     start_checked = session.checked_upto
@@ -461,15 +474,16 @@ def _fault_sequence(
         if kind != "soft reset" and not _moving_at(trace, t, start_checked):
             continue
         rest = _rest_after(trace, t, start_checked)
-        if final_end is not None:
+        if final_end is not None and not any(t < j <= rest for j in session.own_jogs_s):
             at_rest = measure.position_at(trace, rest)
             if all(
                 abs(r - e) * k <= 1.0 + 1e-9
                 for r, e, k in zip(at_rest, final_end, steps_per_mm, strict=False)
             ):
-                # It struck a machine braking into the end of all smoothjog had sent, which
-                # then rested there anyway: it stopped nothing that anyone could see, and a
-                # press made before it may rightly go on.
+                # It struck a machine braking into the end of all smoothjog had sent (a stop,
+                # a queue let run out, a jog run up to an edge or a keep-out), which sent no
+                # jog more before the machine rested, and rested there anyway: it stopped
+                # nothing that anyone could see, and a press made before it may rightly go on.
                 report.outside_stopped_nothing += 1
                 continue
         if own_due and any(t < c <= rest for c in session.own_cancels_s):
@@ -503,12 +517,10 @@ def _fmt(p: tuple[float, ...]) -> str:
     return ",".join(f"{v:.3f}" for v in p)
 
 
-def _final_end(engine: Jogger) -> tuple[float, ...] | None:
-    """Where the engine's path ends while it sends no more (stopping, or letting it run out)."""
+def _path_end(engine: Jogger) -> tuple[float, ...] | None:
+    """Where everything the engine has sent ends (None without a path)."""
     track = engine._track
-    if engine.phase in (Phase.STOPPING, Phase.SETTLING) and track.path:
-        return track.end_mm
-    return None
+    return track.end_mm if track.path else None
 
 
 def _own_cancel_due(engine: Jogger) -> bool:
