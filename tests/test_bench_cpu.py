@@ -129,9 +129,10 @@ def test_the_floor_streams_the_same_jog_against_the_real_simulator(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # bench/cpu_floor.py is the reference of `--floor`: it must really jog (the bench refuses a
-    # run that did not move as scripted) and be named in the report for what it is. The hold is
-    # long enough (1.4 s more than the short run) that the floor's own cost shows above the
-    # spread of its start-up, so the ratio has a positive reference to divide by.
+    # run that did not move as scripted) and be named in the report for what it is. On a loaded
+    # machine the floor's cost over 1.4 s can drown in the spread of its start-up (CI saw it at
+    # or below zero), and then the bench gives no ratio rather than a meaningless one: either is
+    # a correct report here; the ratio's arithmetic is tested with fake hosts below.
     argv = ["--floor", "--hold-s", "1.5", "--repeat", "1", "--speeds", "1.0", "--quiet", "--out"]
     code = cpu.main([*argv, str(tmp_path)])
     printed = capsys.readouterr()
@@ -140,7 +141,7 @@ def test_the_floor_streams_the_same_jog_against_the_real_simulator(
     assert "Reference host: `python -m bench.cpu_floor jog --port PTY" in text
     assert "streaming only: no engine, ledger or tracker" in text
     (cells,) = _cells(text)
-    assert re.fullmatch(r"-?\d+\.\d+", cells["under test / reference, per repeat"])
+    assert re.fullmatch(r"-?\d+\.\d+|n/a", cells["under test / reference, per repeat"])
 
 
 def test_the_floor_sends_what_the_engine_would() -> None:
