@@ -155,6 +155,86 @@ def test_a_fresh_jog_at_rest_at_its_start_or_braking_into_its_first_blocks_end_i
     assert h.engine.phase is Phase.JOGGING
 
 
+def _long_block_jog(dt_floor_s: float = 0.3) -> tuple[EngineHarness, float]:
+    """A fresh jog at 50 mm/s over a slow link whose blocks run dt_floor_s each (the fuzz saw
+    13 mm blocks at 9600 baud), its first `?` just asked; returns the harness and the first
+    block's length."""
+    h = EngineHarness(tuning=JogTuning(byte_s=10 / 9600, dt_floor_s=dt_floor_s))
+    h.rest_at(START_MPOS)
+    h.intent(ContinuousIntent({"X": -1.0}, 0.6))
+    h.run(0.08)
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+    return h, h.engine._track.path[0].length_mm
+
+
+def _ask_again(h: EngineHarness, after_s: float) -> None:
+    """Let after_s pass, then on to the engine's next `?` and a little past it."""
+    h.run(h.t + after_s)
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+
+
+def test_a_fresh_jog_far_slower_than_its_long_block_allows_there_was_stopped_outside() -> None:
+    # Inside a planned block the machine speeds up from at least rest and brakes only for its
+    # end, whatever the link did: 25 mm/s 6 mm into a 15 mm block of 50 mm/s is someone else
+    # braking it. Unseen (a hold at 9600 baud, between two reports), the next line started
+    # the machine again and 17 mm ran (fuzz).
+    h, first_mm = _long_block_jog()
+    assert first_mm > 14.0
+    track = h.engine._track
+    h.status("Jog", track.point_at(6.0), fs=(1500, 0))
+    faults = _outside_faults(h)
+    assert faults, h.fault_texts()
+    assert "ran at 1500 mm/min" in faults[0]
+    assert h.engine.phase is Phase.STOPPING
+
+
+def test_a_long_block_speeding_up_cruising_or_braking_for_its_end_is_not_judged() -> None:
+    # Places as measured from the block's start (>= 0) or back from its end (< 0). FS runs
+    # ahead of the position by up to the committed lead (2 x 50 ms allowed): 4 mm before the
+    # end it may already show the braking for that end (the next line came late).
+    for at_mm, fs_mm_min in ((0.4, 1150), (6.0, 2700), (-4.0, 600)):
+        h, first_mm = _long_block_jog()
+        x_mm = first_mm + at_mm if at_mm < 0 else at_mm
+        h.status("Jog", h.engine._track.point_at(x_mm), fs=(fs_mm_min, 0))
+        assert h.fault_texts() == [], (at_mm, fs_mm_min)
+        assert h.engine.phase is Phase.JOGGING
+
+
+def test_a_rest_inside_a_block_short_of_its_end_a_report_later_was_stopped_outside() -> None:
+    # FS:0 1.2 mm before the block's end may be its last committed segments still running; a
+    # report asked 0.15 s later that finds it still short of that end (moving off again) is
+    # a machine someone else stopped there. Unseen at 9600 baud, 22 mm ran (fuzz).
+    h, first_mm = _long_block_jog()
+    track = h.engine._track
+    h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
+    assert h.fault_texts() == []
+    _ask_again(h, 0.15)
+    h.status("Jog", track.point_at(first_mm - 1.05), fs=(1500, 0))
+    faults = _outside_faults(h)
+    assert faults, h.fault_texts()
+    assert "rested 1.20 mm before the end" in faults[0]
+
+
+def test_a_rest_inside_a_block_that_runs_on_to_its_end_is_not_judged() -> None:
+    h, first_mm = _long_block_jog()
+    track = h.engine._track
+    h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
+    _ask_again(h, 0.15)
+    h.status("Jog", track.point_at(first_mm + 0.3), fs=(1500, 0))  # on into the next block
+    assert h.fault_texts() == []
+    # Nor is a second report too soon after the first to say the committed segments ran.
+    h, first_mm = _long_block_jog()
+    track = h.engine._track
+    h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
+    h.status("Jog", track.point_at(first_mm - 1.1), fs=(0, 0))
+    assert h.fault_texts() == []
+    assert h.engine.phase is Phase.JOGGING
+
+
 def test_after_an_outside_stop_the_held_stick_does_not_move_the_machine_again() -> None:
     h = _cruising()
     h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0))

@@ -104,6 +104,11 @@ QUEUE_FLOOR_MM = 0.3
 #: The least distance a `FS:0` report may still leave to the end of the queue with nothing
 #: outside at work (see _lags_outside).
 FS_LEAD_FLOOR_MM = 0.1
+#: A reported feed below this share of the slowest a block can run at the reported place
+#: (less SLOWED_FLOOR_MM_S) is a machine someone else is braking (see _slowed_inside_a_block):
+#: room for FS's integer rounding and an acceleration a fifth lower than the engine's.
+SLOWED_SHARE = 0.8
+SLOWED_FLOOR_MM_S = 1.0
 #: A stop this many steps (of the worst axis) off the path sent was not smoothjog's doing: the
 #: fuzz's worst tracked-minus-real without outside events is under one step.
 OFF_PATH_STOP_STEPS = 5.0
@@ -489,6 +494,9 @@ class Jogger:
         self._seen_at_speed: inc.VectorMove | None = None
         #: A report of this run showed the machine at its commanded speed, with no stall since.
         self._cruised = False
+        #: A Jog report at FS:0 inside a block: when it was built at the latest, where it put
+        #: the machine, and the block (see _rested_inside_a_block).
+        self._rest_inside: tuple[float, float, PathSeg] | None = None
         #: The oldest line watched for being left unread, and when the last report that asked
         #: after it reached smoothjog, and how many did (see _lines_unread).
         self._unread_entry: Entry | None = None
@@ -970,6 +978,7 @@ class Jogger:
         # A new run is judged once a report shows it at speed, whatever reports came between.
         self._cruised = False
         self._seen_at_speed = None
+        self._rest_inside = None
 
     def _ahead_s(self, block_s: float) -> float:
         """Queue time beyond the stopping distance: committed segments, round trip, one tick.
@@ -2033,10 +2042,14 @@ class Jogger:
         if report.state != "Jog" or not self._queue_runs_as_sent():
             self._seen_at_speed = None
             self._cruised = False
+            self._rest_inside = None
             return None
         feed = report.feed
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
         step_mm = 1.0 / min(self.limits.steps_per_mm)
+        rested = self._rested_inside_a_block(report, asked_s, now_s, step_mm)
+        if rested is not None:
+            return rested
         acked_end_mm = self._acked_end_mm()
         # At speed: the commanded one, or that of the jog it is on (a slide along a keep-out or
         # the envelope runs slower than the stick asks).
@@ -2079,6 +2092,10 @@ class Jogger:
                 )
             ):
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
+        if feed is not None:
+            slowed = self._slowed_inside_a_block(feed, step_mm)
+            if slowed is not None:
+                return slowed
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
                 self._seen_at_speed = move
@@ -2125,6 +2142,91 @@ class Jogger:
         if lag_mm > allowed_mm + margin_mm:
             return f"it fell {lag_mm:.2f} mm behind the path it was sent"
         return None
+
+    def _rested_inside_a_block(
+        self, report: StatusReport, asked_s: float | None, now_s: float, step_mm: float
+    ) -> str | None:
+        """A sentence when a Jog report at FS:0 put the machine inside a block and a report
+        built after the committed segments surely ran still finds it short of that block's end;
+        else None.
+
+        FS:0 says the segments prepared last end at rest. With nothing outside at work the
+        planner plans rest only at a block's end (the end of what it holds, or a reversal), so
+        the machine reaches that end within the committed lead (at most 2 x committed_s). Only
+        someone else's stop rests it inside a block. One report there can be a machine still
+        running its last segments; the second, asked that long after the first was built,
+        settles it, even when the lines behind the stop already start the machine again: a
+        hold at 9600 baud rested a jog 1.24 mm before its block's end, the next report showed
+        it moving off again from there, and 22 mm ran (fuzz, Grbl). Another program's `?` may
+        answer ours early, so with other pollers on the wire this sign is not used.
+        """
+        x_mm = self._track.x_reported_mm
+        if x_mm is None or self.ledger.relayed or self.ledger.stats.queries_by_others > 0:
+            self._rest_inside = None
+            return None
+        margin_mm = max(OUTSIDE_LAG_MM, 4.0 * step_mm)
+        if self._rest_inside is not None:
+            built_s, rest_mm, seg = self._rest_inside
+            if self._track.seg_at(rest_mm) is not seg or x_mm >= seg.x1_mm - margin_mm:
+                self._rest_inside = None  # a new path, or it ran on to the block's end
+            elif asked_s is not None and asked_s - built_s >= 2.0 * self.tuning.committed_s:
+                self._rest_inside = None
+                return (
+                    f"it rested {seg.x1_mm - rest_mm:.2f} mm before the end of a jog it was"
+                    " sent and did not run on to it"
+                )
+            else:
+                return None
+        if report.feed != 0.0:
+            return None
+        here = self._track.seg_at(x_mm)
+        if (
+            here is not None
+            and here.acked
+            and x_mm - here.x0_mm > margin_mm
+            and here.x1_mm - x_mm > margin_mm
+        ):
+            # Built at the latest when its last byte left the controller.
+            self._rest_inside = (now_s - (len(report.raw) + 2) * self._byte_s, x_mm, here)
+        return None
+
+    def _slowed_inside_a_block(self, feed_mm_min: float, step_mm: float) -> str | None:
+        """A sentence when the reported feed is below the slowest that the block the machine is
+        in can run at the reported place, whatever the link did; else None.
+
+        Once a block is planned, the planner speeds the machine up along it at the block's
+        acceleration from whatever speed it entered at (at least from rest), and if no block
+        followed in time it brakes to rest at the block's end. FS is the speed where the
+        segments prepared last end, which is at or ahead of the position by at most the
+        committed lead. So x into a block of speed v, length L and acceleration a, FS is at
+        least min(v, sqrt(2a·x), sqrt(2a·(L - x - lead))), however late its replies or the
+        next line came, and whether the run was ever seen at speed. Lower, someone else is
+        braking the machine (or starting it again after such a stop). Short blocks leave this
+        no room; the long ones of slow links do: a feed hold at 9600 baud braked a fresh jog
+        to rest inside its 13 mm block between two reports, its next line started it again,
+        and 17 mm ran (fuzz, Grbl).
+        """
+        x_mm = self._track.x_reported_mm
+        if x_mm is None:
+            return None
+        seg = self._track.seg_at(x_mm)
+        if seg is None or not seg.acked or seg.speed_mm_s <= 0.0:
+            return None
+        a = seg.accel_mm_s2
+        lead_mm = seg.speed_mm_s * 2.0 * self.tuning.committed_s + max(
+            OUTSIDE_LAG_MM, 3.0 * step_mm
+        )
+        into_mm = x_mm - seg.x0_mm
+        left_mm = seg.x1_mm - x_mm - lead_mm
+        if into_mm <= 0.0 or left_mm <= 0.0:
+            return None
+        low_mm_s = min(seg.speed_mm_s, math.sqrt(2.0 * a * into_mm), math.sqrt(2.0 * a * left_mm))
+        if mm_min_to_mm_s(feed_mm_min) >= SLOWED_SHARE * low_mm_s - SLOWED_FLOOR_MM_S:
+            return None
+        return (
+            f"it ran at {feed_mm_min:.0f} mm/min {into_mm:.2f} mm into a jog that runs at least"
+            f" {mm_s_to_mm_min(low_mm_s):.0f} mm/min there"
+        )
 
     def _running_out_at_a_boundary(self, within_mm: float) -> bool:
         """True when everything sent ends at the envelope or a keep-out, within_mm ahead of the
