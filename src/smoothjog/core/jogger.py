@@ -485,6 +485,8 @@ class Jogger:
         #: When the stop began its current wait, and when the last reply to the engine came.
         self._stop_wait_s = -math.inf
         self._last_reply_s = -math.inf
+        #: `~` was sent for a silent Idle since the last reply (see _release_suspend).
+        self._suspend_released = False
         self._prev_sent_s = -math.inf
         #: How late the host woke the engine for its planned top-ups (90th percentile).
         self._late_s = _Window(RTT_WINDOW)
@@ -552,6 +554,8 @@ class Jogger:
         #: A banner came with jog lines unanswered: one 0x85 goes out at once (reset_outputs).
         self._reset_cancel = False
         self._idle_since_s: float | None = None  # the first of the Idle reports in a row
+        #: When the `?` of each Idle report in a row was written (None: not known).
+        self._idle_asked_s: list[float | None] = []
         self._fault: tuple[str, str] | None = None
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
@@ -739,6 +743,7 @@ class Jogger:
             return True
         self._pending.popleft()
         self._last_reply_s = now_s
+        self._suspend_released = False
         first_ack = not self._track.moving_since_ack
         self._on_reply(entry, resp, now_s)
         routine = (
@@ -1628,6 +1633,7 @@ class Jogger:
         self.phase = Phase.STOPPING
         self._stop.begin()
         self._stop_wait_s = now_s
+        self._suspend_released = False
 
     def _reply_overdue(self, now_s: float) -> bool:
         """True when the stop has waited for a reply longer than any link delays one.
@@ -1635,24 +1641,49 @@ class Jogger:
         While the machine still moves, Grbl may rightly hold a reply until its planner has
         room (a long block on a slow machine), so the wait is then eight times as long;
         once a report since the wait began shows it at rest, the short wait applies.
+
+        That report must answer a `?` written a usual round trip after the wait began (two,
+        when another program polls too and may have asked first): the controller had the
+        awaited lines before it, and writes a line's reply before any report it builds after
+        parsing that line, so the link carried traffic back after the reply was due. An Idle
+        report from before a stall proves nothing: at 9600 baud a stall held a sync line's
+        reply for 0.58 s, it was given up, and when it came it went to the step sent next,
+        which was then taken for done before it moved (the engine 8.8 mm off, and the next
+        step went into a keep-out; fuzz, FluidNC).
         """
         since_s = max(self._stop_wait_s, self._last_reply_s)
         limit_s = max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
         idle_s = self._idle_since_s
-        if idle_s is not None:
+        others = self.ledger.relayed or self.ledger.stats.queries_by_others > 0
+        answered_after = sum(
+            1 for a in self._idle_asked_s if a is not None and a >= since_s + self._rtt_s
+        )
+        if idle_s is not None and answered_after >= 1 + others:
             # Reported at rest (every report since the first Idle one) for limit_s of the wait:
             # nothing can still be running that the reply would wait for.
             return now_s - max(idle_s, since_s) > limit_s
         return now_s - since_s > 8.0 * limit_s
 
-    def _release_suspend(self, out: list[Output]) -> None:
+    def _release_suspend(self, now_s: float, out: list[Output]) -> bool:
         """Before lines are given up as lost: a Grbl 1.1h that reports Idle yet answers no line
         may be suspended by a 0x85 that reached it as a cancel ended (firmware-facts §3.8);
-        `~` releases it. In a plain Idle it does nothing (its planner is empty)."""
+        `~` releases it. In a plain Idle it does nothing (its planner is empty).
+
+        True when `~` went out now: the lines still in the controller's buffer are then parsed
+        and answered, so the wait starts again rather than giving them up. Given up at once,
+        each of their late `ok`s went to the next line: the sync's to a 10 mm Z step sent
+        after it, which the engine then took for done before it began (fuzz, Grbl, Wi-Fi with
+        stalls: 4000 steps of tracking error at that stop)."""
         facts = firmware_facts(self.limits.firmware).jog_cancel
-        if facts.late_cancel_suspends and self.model.state == "Idle":
-            out.append(SendRealtime(CYCLE_START))
-            self.stats.suspend_releases += 1
+        if self._suspend_released or not (
+            facts.late_cancel_suspends and self.model.state == "Idle"
+        ):
+            return False
+        out.append(SendRealtime(CYCLE_START))
+        self.stats.suspend_releases += 1
+        self._suspend_released = True
+        self._stop_wait_s = now_s
+        return True
 
     def _presume_lost(self, now_s: float, kinds: tuple[str, ...]) -> int:
         """Release the engine's unanswered lines of these kinds as answered; say so."""
@@ -1688,8 +1719,9 @@ class Jogger:
                 # §3.1, §3.7).
                 if not self._reply_overdue(now_s):
                     return  # a cancel now would let these lines run on (firmware-facts §3.1)
+                if self._release_suspend(now_s, out):
+                    return  # their replies come once `~` acts
                 # Their replies were lost: the lines ran (or run); cancel whatever moves.
-                self._release_suspend(out)
                 self._presume_lost(now_s, ("jog",))
                 self._stop.owe_cancel()
             if self._cancel_ending and self.model.state == "Jog":
@@ -1723,7 +1755,8 @@ class Jogger:
         elif self._stop.phase is StopPhase.WAIT_SYNC and self._reply_overdue(now_s):
             # The sync line's reply was lost: sync again (Grbl answers each G4P0 once it has
             # run every line before it), a bounded number of times.
-            self._release_suspend(out)
+            if self._release_suspend(now_s, out):
+                return  # its reply comes once `~` acts
             self._presume_lost(now_s, ("sync",))
             if self._stop.may_recancel():
                 self._stop.recancel()  # back to waiting for acks, then 0x85 and G4P0 again
@@ -1912,8 +1945,12 @@ class Jogger:
             self._cancel_ending = False
         if report.state != "Idle":
             self._idle_since_s = None
-        elif self._idle_since_s is None:
-            self._idle_since_s = now_s
+            self._idle_asked_s.clear()
+        else:
+            if self._idle_since_s is None:
+                self._idle_since_s = now_s
+            self._idle_asked_s.append(asked_s)
+            del self._idle_asked_s[:-4]
         state = report.state
         mpos = self.model.mpos_mm
         lead_mm = 0.0
