@@ -369,6 +369,39 @@ def test_a_stop_far_off_the_path_sent_is_said_and_not_judged_as_tracking() -> No
     assert h.engine.stats.stops[-1].after_outside_stop
 
 
+def test_a_refused_step_does_not_hide_a_step_thrown_away_from_outside() -> None:
+    # A 1 mm X- step is sent and answered, a Y+ step toward a keep-out is refused (nothing of
+    # it is sent), and the machine comes to rest where it started: an outside 0x85 threw the X
+    # step away (FluidNC answers a jog it throws away with `ok`). The refusal says nothing
+    # about the path sent, so the rest 1 mm short of it is still someone else's doing.
+    from smoothjog.core.machine import KeepOut
+
+    zone = KeepOut("vise", (-100.0, -30.0, -100.0), (-20.0, -10.0, 0.0))
+    h = EngineHarness(keepouts=(zone,))
+    start = (-25.0, -30.01, -1.0)  # at the zone's Y- face: no room for Y+
+    h.rest_at(start)
+    h.intent(StepIntent("X", -1.0))
+    for _ in range(20):
+        if "$J" in kinds(h.poll()):
+            break
+        h.advance(0.005)
+        h.status("Idle", start)
+    assert h.unanswered() == ["$J=G21G91X-1F2500"], h.unanswered()
+    h.ok()
+    h.intent(StepIntent("Y", 1.0))
+    h.poll()
+    assert any("step refused" in t for t in h.fault_texts()), h.fault_texts()
+    for _ in range(200):
+        h.advance(0.01)
+        if "?" in kinds(h.poll()):
+            h.status("Idle", start)  # it never moved
+        if h.engine.phase is Phase.IDLE:
+            break
+    assert h.engine.phase is Phase.IDLE
+    assert any("off the path smoothjog sent" in t for t in h.fault_texts()), h.fault_texts()
+    assert h.engine.stats.stops[-1].after_outside_stop
+
+
 def test_a_stop_on_the_path_raises_nothing() -> None:
     h = _cruising()
     h.intent(StopIntent())

@@ -557,6 +557,8 @@ class Jogger:
         #: When the `?` of each Idle report in a row was written (None: not known).
         self._idle_asked_s: list[float | None] = []
         self._fault: tuple[str, str] | None = None
+        #: A fault other than a refusal came since the last stop (see _finish_stop).
+        self._path_faulted = False
         self._last_report: tuple[float, Vec] | None = None
         self._actual_speed_mm_s = 0.0
         #: When the streaming queue needs its next top-up (None: a reply will say).
@@ -593,6 +595,7 @@ class Jogger:
             self._intent = None
             self._await_press = False  # a step is a press of its own
             self._fault = None  # and the user has seen what went wrong before it
+            self._path_faulted = False
             return
         if isinstance(intent, HandwheelIntent):
             self._validate(intent)
@@ -614,6 +617,7 @@ class Jogger:
             # (A held stick re-sent by its input is no new press and keeps it.)
             self._released = False
             self._fault = None
+            self._path_faulted = False
         if self._await_press:
             # Someone else stopped this jog: the stick still held (or re-sent by its input) is
             # not a new press, so the machine stays where it was stopped.
@@ -901,7 +905,9 @@ class Jogger:
         except JogBuildError as exc:
             # A line that cannot be written (a value no axis can reach, say): never send it,
             # stop what runs, and say why; the driver keeps running.
-            self._fault_now(now_s, f"jog not sent: {exc}", "check the intent that asked for it")
+            self._fault_now(
+                now_s, f"jog not sent: {exc}", "check the intent that asked for it", refusal=True
+            )
             self._intent = None
             self._steps.clear()
             self._begin_stop(now_s)
@@ -1553,7 +1559,10 @@ class Jogger:
         problem = self._path_problem(start, end)
         if problem is not None:
             self._fault_now(
-                self._track.est_s, f"jog refused: {problem}", "jog less far or elsewhere"
+                self._track.est_s,
+                f"jog refused: {problem}",
+                "jog less far or elsewhere",
+                refusal=True,
             )
             return None
         delta = tuple(e - s for e, s in zip(end, start, strict=True))
@@ -1597,6 +1606,7 @@ class Jogger:
                 f"step refused: no room to jog {name}, {by} is there"
                 f" ({self._where_blocked(start)})",
                 "jog the other way",
+                refusal=True,
             )
             return None
         self.events.append(
@@ -1812,8 +1822,11 @@ class Jogger:
             )
             outside = self._stop.owed
             # (A fault already raised in this run, a rejected line or a Run-state race, has
-            # said why the path no longer holds.)
-            if err_steps > OFF_PATH_STOP_STEPS and not outside and self._fault is None:
+            # said why the path no longer holds; a refused step or jog has not: nothing of it
+            # was sent. A step refused at a keep-out hid an outside cancel that threw away the
+            # step sent before it, 1 mm short, in the fuzz: FluidNC at 38400 baud.)
+            path_faulted, self._path_faulted = self._path_faulted, False
+            if err_steps > OFF_PATH_STOP_STEPS and not outside and not path_faulted:
                 # Every line smoothjog sent stops on its path, to a step: a rest this far off
                 # it is motion that was not smoothjog's (a stop from outside seen only now,
                 # whose left-over lines ran from where it left the machine, firmware-facts
@@ -2583,8 +2596,12 @@ class Jogger:
             )
         return True, None
 
-    def _fault_now(self, now_s: float, text: str, hint: str) -> None:
+    def _fault_now(self, now_s: float, text: str, hint: str, *, refusal: bool = False) -> None:
+        """Show a fault. A refusal (a step or jog not sent) leaves the path already sent as
+        it was; any other fault says why that path may no longer hold (see _finish_stop)."""
         self._fault = (text, hint)
+        if not refusal:
+            self._path_faulted = True
         self.events.append(EngineEvent(now_s, "fault", text, hint))
 
     # ----------------------------------------------------------------- views
