@@ -204,6 +204,56 @@ def test_a_long_block_speeding_up_cruising_or_braking_for_its_end_is_not_judged(
         assert h.engine.phase is Phase.JOGGING
 
 
+def _fresh_fast_jog() -> EngineHarness:
+    """A fresh held X- jog at full speed 50 ms in, every line answered, a `?` just asked."""
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    h.run(0.05)
+    while h.engine._status_asked_s is None:
+        h.run(h.t + 0.002)
+    h.advance(0.003)
+    return h
+
+
+def test_a_fresh_jog_braking_below_what_its_held_jogs_allow_was_stopped_outside() -> None:
+    # Speeding up across its first short blocks (40 mm/s 0.3 mm in), with every jog answered
+    # far beyond: the next report at 15 mm/s 1.5 mm on is someone else braking it. Unseen
+    # (FluidNC, an outside 0x85), the engine sent its next line into the braking and that line
+    # ran 5 mm on (fuzz).
+    h = _fresh_fast_jog()
+    track = h.engine._track
+    held_mm = track.path[-1].x1_mm
+    assert held_mm > 10.0  # answered jogs reach far beyond the reports below
+    h.status("Jog", track.point_at(0.3), fs=(2400, 0))
+    assert h.fault_texts() == []
+    _ask_again(h, 0.04)
+    h.status("Jog", track.point_at(1.8), fs=(900, 0))
+    faults = _outside_faults(h)
+    assert faults, h.fault_texts()
+    assert "slowed to 900 mm/min" in faults[0]
+    assert h.engine.phase is Phase.STOPPING
+
+
+def test_held_jogs_speeding_up_or_braking_for_their_end_are_not_judged() -> None:
+    # From the same first report: faster later is the planner's own doing, and so is a feed
+    # that braking for the end of what was answered allows (the queue ran dry).
+    h = _fresh_fast_jog()
+    track = h.engine._track
+    h.status("Jog", track.point_at(0.3), fs=(2400, 0))
+    _ask_again(h, 0.04)
+    h.status("Jog", track.point_at(2.5), fs=(3600, 0))
+    assert h.fault_texts() == []
+    h = _fresh_fast_jog()
+    track = h.engine._track
+    h.status("Jog", track.point_at(0.3), fs=(2400, 0))
+    end_mm = track.path[-1].x1_mm
+    _ask_again(h, 0.01)  # too soon for a top-up: the end of the answered jogs is where it was
+    assert track.path[-1].x1_mm == end_mm
+    h.status("Jog", track.point_at(end_mm - 1.0), fs=(600, 0))  # braking for that end
+    assert h.fault_texts() == []
+
+
 def test_a_rest_inside_a_block_short_of_its_end_a_report_later_was_stopped_outside() -> None:
     # FS:0 1.2 mm before the block's end may be its last committed segments still running; a
     # report asked 0.15 s later that finds it still short of that end (moving off again) is

@@ -499,6 +499,9 @@ class Jogger:
         #: A Jog report at FS:0 inside a block: when it was built at the latest, where it put
         #: the machine, and the block (see _rested_inside_a_block).
         self._rest_inside: tuple[float, float, PathSeg] | None = None
+        #: The last Jog report's place and FS (mm/s), where the acknowledged jogs then ended,
+        #: and the jog it was on (see _slowed_since_last_report).
+        self._prev_jog_report: tuple[float, float, float, PathSeg] | None = None
         #: The oldest line watched for being left unread, and when the last report that asked
         #: after it reached smoothjog, and how many did (see _lines_unread).
         self._unread_entry: Entry | None = None
@@ -990,6 +993,7 @@ class Jogger:
         self._cruised = False
         self._seen_at_speed = None
         self._rest_inside = None
+        self._prev_jog_report = None
 
     def _ahead_s(self, block_s: float) -> float:
         """Queue time beyond the stopping distance: committed segments, round trip, one tick.
@@ -2093,6 +2097,7 @@ class Jogger:
             self._seen_at_speed = None
             self._cruised = False
             self._rest_inside = None
+            self._prev_jog_report = None
             return None
         feed = report.feed
         cmd_mm_min = mm_s_to_mm_min(move.speed_mm_s)
@@ -2144,8 +2149,12 @@ class Jogger:
                 return f"it stood still {rest_ahead_mm:.2f} mm short of the path it was sent"
         if feed is not None:
             slowed = self._slowed_inside_a_block(feed, step_mm)
+            if slowed is None:
+                slowed = self._slowed_since_last_report(feed, step_mm)
             if slowed is not None:
                 return slowed
+        else:
+            self._prev_jog_report = None
         if self._seen_at_speed != move:  # by value: an input re-sends the same stick
             if feed is not None and feed >= 0.95 * cmd_mm_min:
                 self._seen_at_speed = move
@@ -2276,6 +2285,66 @@ class Jogger:
         return (
             f"it ran at {feed_mm_min:.0f} mm/min {into_mm:.2f} mm into a jog that runs at least"
             f" {mm_s_to_mm_min(low_mm_s):.0f} mm/min there"
+        )
+
+    def _slowed_since_last_report(self, feed_mm_min: float, step_mm: float) -> str | None:
+        """A sentence when the reported feed is below the slowest the jogs acknowledged by the
+        last report allow at the reported place, starting from that report's feed; else None.
+
+        Every jog answered before a report was built was in the planner then (Grbl writes a
+        line's reply before any report it builds after it), and the planner runs them at the
+        fastest speed that can still brake for their end and for every junction on the way;
+        a line added since only moves the end further. So from the last report's place and
+        feed on, FS (the speed where the segments prepared end, at most the committed lead
+        ahead of the position) stays at least that feed, each jog's own speed, what each
+        junction passed or ahead allows, and what braking for the end of those jogs allows.
+        Lower, someone else is braking the machine. A fresh jog still speeding up across its
+        first short blocks was missed otherwise: FluidNC cancelled from outside at 40 mm/s,
+        the engine sent its next line into the braking, and that line ran 5 mm on (fuzz).
+        """
+        prev, self._prev_jog_report = self._prev_jog_report, None
+        x_mm = self._track.x_reported_mm
+        held_end_mm = self._acked_end_mm()
+        if x_mm is None or held_end_mm is None or self.ledger.relayed:
+            return None
+        here = self._track.seg_at(x_mm)
+        if here is None:
+            return None
+        self._prev_jog_report = (x_mm, mm_min_to_mm_s(feed_mm_min), held_end_mm, here)
+        if prev is None:
+            return None
+        x0_mm, fs0_mm_s, end_mm, seg0 = prev
+        path = self._track.path
+        if x_mm < x0_mm or not any(seg is seg0 for seg in path):
+            return None  # a new path, or a report that went back
+        held = [seg for seg in path if seg.x1_mm > x0_mm and seg.x0_mm < end_mm]
+        if not held or not all(seg.acked for seg in held):
+            return None
+        v_top = max(seg.speed_mm_s for seg in held)
+        lead_mm = v_top * 2.0 * self.tuning.committed_s + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
+        at_mm = x_mm + lead_mm  # FS is the speed somewhere in [x_mm, at_mm]
+        if at_mm >= end_mm:
+            return None
+        a = min(seg.accel_mm_s2 for seg in held)
+        low = min(fs0_mm_s, math.sqrt(2.0 * a * (end_mm - at_mm)))
+        for seg in held:
+            if seg.x1_mm > x_mm and seg.x0_mm < at_mm:
+                low = min(low, seg.speed_mm_s)
+            xj = seg.x0_mm
+            if xj <= x0_mm:
+                continue  # a junction behind the last report's place: in its feed already
+            cap = min(seg.entry_cap_mm_s, seg.speed_mm_s)
+            if xj >= at_mm:
+                low = min(low, math.sqrt(cap * cap + 2.0 * a * (xj - at_mm)))
+            elif xj > x_mm:
+                low = min(low, cap)
+            else:
+                low = min(low, math.sqrt(cap * cap + 2.0 * a * (x_mm - xj)))
+        if mm_min_to_mm_s(feed_mm_min) >= SLOWED_SHARE * low - SLOWED_FLOOR_MM_S:
+            return None
+        return (
+            f"it slowed to {feed_mm_min:.0f} mm/min where the jogs it already held let it run"
+            f" at least {mm_s_to_mm_min(low):.0f} mm/min"
         )
 
     def _running_out_at_a_boundary(self, within_mm: float) -> bool:
