@@ -469,9 +469,16 @@ def _fault_sequence(
     idle = _stop_and_check(session, report, idle_timeout_s=20.0)
     trace = vs.rig.trace
     steps_per_mm = session.engine.limits.steps_per_mm
+    hold_cancels = session.vs.rig.firmware.profile.facts.jog_cancel.feed_hold_cancels
     for t, kind, own_due, final_end in stops:
         # A hold or cancel of a machine at rest stops nothing; a reset stops it in any case.
         if kind != "soft reset" and not _moving_at(trace, t, start_checked):
+            continue
+        if kind == "feed hold" and not hold_cancels:
+            # grblHAL leaves a jog alone on a feed hold (firmware-facts §7; the fuzz only jogs):
+            # it stopped nothing, and a rest that follows is the engine's own doing (a queue
+            # let run out at a keep-out's corner, say), not a restart.
+            report.outside_stopped_nothing += 1
             continue
         rest = _rest_after(trace, t, start_checked)
         if final_end is not None and not any(t < j <= rest for j in session.own_jogs_s):

@@ -66,3 +66,20 @@ def test_the_fuzz_counts_an_exception_and_carries_on_with_a_fresh_session(
     assert r.crashes == 1
     assert len(calls) == 3
     assert any("the engine fell over" in f for f in r.faults)
+
+
+def test_a_feed_hold_that_grblhal_ignores_in_jog_is_no_outside_stop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # grblHAL's state machine leaves a jog alone on `!` (the simulator does as its facts say):
+    # the machine runs on, and a rest the engine makes later is not a restart. On Grbl the
+    # same holds are outside stops.
+    monkeypatch.setattr(fuzz, "OUTSIDE_EVENTS", {"feed hold": b"!"})
+    faults = fuzz.Faults(outside_rate=1.0)
+    hal = fuzz.run_fuzz("grblhal", 12, seed=5, link="ideal", faults=faults)
+    assert hal.outside.get("feed hold", 0) >= 12
+    assert hal.outside_stops == 0
+    assert hal.restarts_after_outside_stop == 0
+    assert hal.outside_stopped_nothing > 0
+    grbl = fuzz.run_fuzz("grbl", 12, seed=5, link="ideal", faults=faults)
+    assert grbl.outside_stops > 0
