@@ -8,6 +8,8 @@ anew, however often the held stick is re-sent. A pin that reads active all along
 
 from __future__ import annotations
 
+import dataclasses
+
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
 from smoothjog.core.jogger import JogTuning, Phase
 from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
@@ -38,6 +40,14 @@ def _cruising() -> EngineHarness:
 
 def _outside_faults(h: EngineHarness) -> list[str]:
     return [t for t in h.fault_texts() if "stopped outside smoothjog" in t]
+
+
+def _assert_stopped_outside(h: EngineHarness, words: str) -> None:
+    """The engine said someone else stopped the jog, in words containing `words`, and stops."""
+    faults = _outside_faults(h)
+    assert faults, h.fault_texts()
+    assert words in faults[0]
+    assert h.engine.phase is Phase.STOPPING
 
 
 def test_a_jog_that_slows_behind_its_path_is_an_outside_stop_and_is_cancelled() -> None:
@@ -117,16 +127,8 @@ def _fresh_slow_link_jog(rest_at_mm: float) -> tuple[EngineHarness, float]:
     """A jog at 60 % just begun at 9600 baud (its first block long, none of it seen at speed),
     reported at rest in Jog rest_at_mm along its path; returns the harness and the first
     block's length."""
-    h = EngineHarness(tuning=JogTuning(byte_s=10 / 9600))
-    h.rest_at(START_MPOS)
-    h.intent(ContinuousIntent({"X": -1.0}, 0.6))
-    h.run(0.08)
-    while h.engine._status_asked_s is None:
-        h.run(h.t + 0.002)
-    h.advance(0.003)
-    track = h.engine._track
-    first_mm = track.path[0].length_mm
-    h.status("Jog", track.point_at(rest_at_mm), fs=(0, 0))
+    h, first_mm = _long_block_jog(dt_floor_s=None)
+    h.status("Jog", h.engine._track.point_at(rest_at_mm), fs=(0, 0))
     return h, first_mm
 
 
@@ -136,10 +138,7 @@ def test_a_fresh_jog_at_rest_inside_its_first_block_was_stopped_outside() -> Non
     # the next line started the machine again and it ran 18 mm (fuzz).
     h, first_mm = _fresh_slow_link_jog(1.0)
     assert first_mm > 3.5  # long enough that a rest 1 mm in is far inside it
-    faults = _outside_faults(h)
-    assert faults, h.fault_texts()
-    assert "stood still" in faults[0]
-    assert h.engine.phase is Phase.STOPPING
+    _assert_stopped_outside(h, "stood still")
 
 
 def test_a_fresh_jog_at_rest_at_its_start_or_braking_into_its_first_blocks_end_is_not_judged() -> (
@@ -155,11 +154,14 @@ def test_a_fresh_jog_at_rest_at_its_start_or_braking_into_its_first_blocks_end_i
     assert h.engine.phase is Phase.JOGGING
 
 
-def _long_block_jog(dt_floor_s: float = 0.3) -> tuple[EngineHarness, float]:
-    """A fresh jog at 50 mm/s over a slow link whose blocks run dt_floor_s each (the fuzz saw
-    13 mm blocks at 9600 baud), its first `?` just asked; returns the harness and the first
-    block's length."""
-    h = EngineHarness(tuning=JogTuning(byte_s=10 / 9600, dt_floor_s=dt_floor_s))
+def _long_block_jog(dt_floor_s: float | None = 0.3) -> tuple[EngineHarness, float]:
+    """A fresh jog at 50 mm/s at 9600 baud whose blocks run dt_floor_s each (the fuzz saw 13 mm
+    blocks there; None: the engine's own floor), its first `?` just asked; returns the
+    harness and the first block's length."""
+    tuning = JogTuning(byte_s=10 / 9600)
+    if dt_floor_s is not None:
+        tuning = dataclasses.replace(tuning, dt_floor_s=dt_floor_s)
+    h = EngineHarness(tuning=tuning)
     h.rest_at(START_MPOS)
     h.intent(ContinuousIntent({"X": -1.0}, 0.6))
     h.run(0.08)
@@ -186,10 +188,7 @@ def test_a_fresh_jog_far_slower_than_its_long_block_allows_there_was_stopped_out
     assert first_mm > 14.0
     track = h.engine._track
     h.status("Jog", track.point_at(6.0), fs=(1500, 0))
-    faults = _outside_faults(h)
-    assert faults, h.fault_texts()
-    assert "ran at 1500 mm/min" in faults[0]
-    assert h.engine.phase is Phase.STOPPING
+    _assert_stopped_outside(h, "ran at 1500 mm/min")
 
 
 def test_a_long_block_speeding_up_cruising_or_braking_for_its_end_is_not_judged() -> None:
@@ -229,10 +228,7 @@ def test_a_fresh_jog_braking_below_what_its_held_jogs_allow_was_stopped_outside(
     assert h.fault_texts() == []
     _ask_again(h, 0.04)
     h.status("Jog", track.point_at(1.8), fs=(900, 0))
-    faults = _outside_faults(h)
-    assert faults, h.fault_texts()
-    assert "slowed to 900 mm/min" in faults[0]
-    assert h.engine.phase is Phase.STOPPING
+    _assert_stopped_outside(h, "slowed to 900 mm/min")
 
 
 def test_held_jogs_speeding_up_or_braking_for_their_end_are_not_judged() -> None:
@@ -570,10 +566,7 @@ def test_a_jog_line_left_unread_across_two_reports_is_an_outside_stop() -> None:
     _suspended(h, 1)
     assert _outside_faults(h) == []
     _suspended(h, 1, from_feed_mm_min=0.8 * FEED_MM_MIN)
-    faults = _outside_faults(h)
-    assert faults, h.fault_texts()
-    assert "left a jog line unread" in faults[0]
-    assert h.engine.phase is Phase.STOPPING
+    _assert_stopped_outside(h, "left a jog line unread")
 
 
 def test_a_report_asked_before_the_line_can_have_arrived_is_not_counted() -> None:
