@@ -581,6 +581,13 @@ SAMPLES: dict[str, Any] = {
     "jogger.pressed": _pin_names,
     "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool"],
     "jogger._outside_stop.how": _outside_hows,
+    "jogger._rested_inside_a_block.rest_mm": [12.5],
+    "jogger._rested_inside_a_block.seg": [SimpleNamespace(x1_mm=13.74)],
+    "jogger._slowed_inside_a_block.feed_mm_min": [1500.0],
+    "jogger._slowed_inside_a_block.into_mm": [6.0],
+    "jogger._slowed_inside_a_block.low_mm_s": [41.7],
+    "jogger._slowed_since_last_report.feed_mm_min": [826.0],
+    "jogger._slowed_since_last_report.low": [60.2],
     # JogBuildError's texts.
     "jogger.axis": ["A"],
     "jogger.r": [1.5],
