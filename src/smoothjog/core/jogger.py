@@ -1668,7 +1668,7 @@ class Jogger:
         since_s = max(self._stop_wait_s, self._last_reply_s)
         limit_s = max(self.tuning.reply_timeout_s, 10.0 * self._rtt_s)
         idle_s = self._idle_since_s
-        others = self.ledger.relayed or self.ledger.stats.queries_by_others > 0
+        others = self._others_poll()
         answered_after = sum(
             1 for a in self._idle_asked_s if a is not None and a >= since_s + self._rtt_s
         )
@@ -2220,7 +2220,7 @@ class Jogger:
         answer ours early, so with other pollers on the wire this sign is not used.
         """
         x_mm = self._track.x_reported_mm
-        if x_mm is None or self.ledger.relayed or self.ledger.stats.queries_by_others > 0:
+        if x_mm is None or self._others_poll():
             self._rest_inside = None
             return None
         margin_mm = max(OUTSIDE_LAG_MM, 4.0 * step_mm)
@@ -2249,6 +2249,16 @@ class Jogger:
             self._rest_inside = (now_s - (len(report.raw) + 2) * self._byte_s, x_mm, here)
         return None
 
+    def _others_poll(self) -> bool:
+        """True when another program also asks `?` (or relays its lines): a report may then
+        answer its `?` rather than smoothjog's."""
+        return self.ledger.relayed or self.ledger.stats.queries_by_others > 0
+
+    def _fs_lead_mm(self, speed_mm_s: float, step_mm: float) -> float:
+        """How far ahead of the reported position FS may apply at this speed: the committed
+        segments (a lead of up to twice committed_s) and the report's rounding."""
+        return speed_mm_s * 2.0 * self.tuning.committed_s + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
+
     def _slowed_inside_a_block(self, feed_mm_min: float, step_mm: float) -> str | None:
         """A sentence when the reported feed is below the slowest that the block the machine is
         in can run at the reported place, whatever the link did; else None.
@@ -2272,9 +2282,7 @@ class Jogger:
         if seg is None or not seg.acked or seg.speed_mm_s <= 0.0:
             return None
         a = seg.accel_mm_s2
-        lead_mm = seg.speed_mm_s * 2.0 * self.tuning.committed_s + max(
-            OUTSIDE_LAG_MM, 3.0 * step_mm
-        )
+        lead_mm = self._fs_lead_mm(seg.speed_mm_s, step_mm)
         into_mm = x_mm - seg.x0_mm
         left_mm = seg.x1_mm - x_mm - lead_mm
         if into_mm <= 0.0 or left_mm <= 0.0:
@@ -2314,6 +2322,9 @@ class Jogger:
         if prev is None:
             return None
         x0_mm, fs0_mm_s, end_mm, seg0 = prev
+        feed_mm_s = mm_min_to_mm_s(feed_mm_min)
+        if feed_mm_s >= SLOWED_SHARE * fs0_mm_s - SLOWED_FLOOR_MM_S:
+            return None  # the bound below never exceeds the last feed: a steady feed passes
         path = self._track.path
         if x_mm < x0_mm or not any(seg is seg0 for seg in path):
             return None  # a new path, or a report that went back
@@ -2321,8 +2332,8 @@ class Jogger:
         if not held or not all(seg.acked for seg in held):
             return None
         v_top = max(seg.speed_mm_s for seg in held)
-        lead_mm = v_top * 2.0 * self.tuning.committed_s + max(OUTSIDE_LAG_MM, 3.0 * step_mm)
-        at_mm = x_mm + lead_mm  # FS is the speed somewhere in [x_mm, at_mm]
+        # FS is the speed somewhere in [x_mm, at_mm].
+        at_mm = x_mm + self._fs_lead_mm(v_top, step_mm)
         if at_mm >= end_mm:
             return None
         a = min(seg.accel_mm_s2 for seg in held)
@@ -2340,7 +2351,7 @@ class Jogger:
                 low = min(low, cap)
             else:
                 low = min(low, math.sqrt(cap * cap + 2.0 * a * (x_mm - xj)))
-        if mm_min_to_mm_s(feed_mm_min) >= SLOWED_SHARE * low - SLOWED_FLOOR_MM_S:
+        if feed_mm_s >= SLOWED_SHARE * low - SLOWED_FLOOR_MM_S:
             return None
         return (
             f"it slowed to {feed_mm_min:.0f} mm/min where the jogs it already held let it run"
@@ -2450,7 +2461,7 @@ class Jogger:
             return None
         self._unread_reports += 1
         self._unread_seen_s = now_s
-        others = self.ledger.relayed or self.ledger.stats.queries_by_others > 0
+        others = self._others_poll()
         if report.state != "Jog" or self._unread_reports < UNREAD_REPORTS + others:
             return None
         # A planner filled after all (the blocks of a turn from a fast move to a slow one are
