@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import pytest
+
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
 from smoothjog.core.jogger import JogTuning, Phase
 from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
@@ -25,9 +27,9 @@ def _estimate_mm(h: EngineHarness, behind_mm: float = 0.0) -> tuple[float, ...]:
     return track.point_at(track.x_est_mm - behind_mm)
 
 
-def _cruising() -> EngineHarness:
+def _cruising(firmware: str = "grbl") -> EngineHarness:
     """A held X- jog at full speed for a second, one report seen at speed, a `?` just sent."""
-    h = EngineHarness()
+    h = EngineHarness(limits={"firmware": firmware})
     h.rest_at(START_MPOS)
     h.intent(HELD)
     h.run(1.0)
@@ -301,6 +303,33 @@ def test_after_an_outside_stop_the_held_stick_does_not_move_the_machine_again() 
     h.intent(HELD)
     h.run(h.t + 0.1)
     assert len(h.jog_lines()) > jogs_before
+
+
+@pytest.mark.parametrize(("firmware", "cancels"), [("grblhal", True), ("grbl", False)])
+def test_lines_that_run_while_their_oks_are_awaited_are_cancelled_where_0x85_flushes_rx(
+    firmware: str, cancels: bool
+) -> None:
+    # An outside 0x85 on grblHAL empties the RX buffer: some jog lines were thrown away and
+    # their oks never come, while the ones that crossed the wire after it start the machine
+    # again. Waiting for every ok there let 10-28 mm run (fuzz, Wi-Fi and bridge links). On
+    # Grbl the lines all survive and answer; one 0x85 after their oks throws them away
+    # together (firmware-facts §3.1), so it still waits.
+    h = _cruising(firmware)
+    while not h.unanswered():  # a line on its way, as at any moment of a held jog
+        h.advance(0.002)
+        h.poll()
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0))
+    _assert_stopped_outside(h, "short of the path")
+    h.poll()
+    mark = h.mark()
+    h.advance(0.02)
+    h.status("Jog", _estimate_mm(h, behind_mm=2.0), fs=(0, 0))
+    h.advance(0.02)
+    h.status("Jog", _estimate_mm(h, behind_mm=1.9), fs=(1500, 0))  # running again
+    sent = kinds(h.since(mark) + h.poll())
+    assert ("0x85" in sent) is cancels, sent
+    assert "G4P0" not in sent  # no sync while lines may still be answered
+    assert h.unanswered()
 
 
 def test_a_step_after_an_outside_stop_is_a_new_press() -> None:

@@ -1732,6 +1732,18 @@ class Jogger:
                 # others back in the RX buffer, to start one by one after it (firmware-facts
                 # §3.1, §3.7).
                 if not self._reply_overdue(now_s):
+                    if (
+                        self._stop.owed
+                        and self._jog_unbraked
+                        and firmware_facts(self.limits.firmware).jog_cancel.flushes_rx
+                    ):
+                        # Where 0x85 empties the RX buffer (grblHAL, firmware-facts §7), the
+                        # outside cancel threw some of these lines away: their oks never come,
+                        # and the wait would last while the ones that came after it run (10 mm
+                        # ran that way over Wi-Fi, 28 mm over a bridge; fuzz). A 0x85 now
+                        # throws away the rest with the jog that runs, and no sync is out yet
+                        # for it to lose. Each line that still starts later is cut short too.
+                        self._send_owed_cancel(out)
                     return  # a cancel now would let these lines run on (firmware-facts §3.1)
                 if self._release_suspend(now_s, out):
                     return  # their replies come once `~` acts
