@@ -56,6 +56,8 @@ OUTSIDE_EVENTS: dict[str, bytes | None] = {
     "soft reset": b"\x18",
     "stall": None,
 }
+#: A jog cancel's stop completes as the machine comes to rest; this much later still counts.
+CANCEL_END_SLACK_S = 0.005
 #: How long an injected stall lasts: a uniform draw from this range (s).
 STALL_RANGE_S = (0.1, 0.6)
 #: The wedge probe: a press held this long at this speed must move the machine this far.
@@ -481,6 +483,13 @@ def _fault_sequence(
             report.outside_stopped_nothing += 1
             continue
         rest = _rest_after(trace, t, start_checked)
+        if kind != "soft reset" and _threw_nothing_away(session, t, rest):
+            # Every jog cancel that ended the motion threw away no planned motion and no
+            # unread line: the machine rested where it would have without it (braking into
+            # the end of what it held), and what runs later is what ran anyway. No report can
+            # show such a cancel, so a held stick rightly jogs on.
+            report.outside_stopped_nothing += 1
+            continue
         if final_end is not None and not any(t < j <= rest for j in session.own_jogs_s):
             at_rest = measure.position_at(trace, rest)
             if all(
@@ -518,6 +527,20 @@ def _fault_sequence(
                 f"again at {again[0].t0_s:.3f} s ({moved:.2f} mm) with no new press"
             )
     return idle
+
+
+def _threw_nothing_away(session: _Session, t_s: float, rest_s: float) -> bool:
+    """True when the jog cancels that ended between t_s and the rest (host time) left no
+    planned step unrun and dropped no unread line (the simulator's ground truth); False when
+    any did, or none ended there."""
+    rig = session.vs.rig
+    ratio = rig.clock_ratio
+    ended = [
+        (unrun, dropped)
+        for at_s, unrun, dropped in rig.firmware.cancel_log
+        if t_s < at_s / ratio <= rest_s + CANCEL_END_SLACK_S
+    ]
+    return bool(ended) and all(unrun <= 1 and dropped == 0 for unrun, dropped in ended)
 
 
 def _fmt(p: tuple[float, ...]) -> str:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+from typing import Any
+
 import pytest
 from bench import fuzz
 
@@ -58,7 +61,7 @@ def test_the_fuzz_counts_an_exception_and_carries_on_with_a_fresh_session(
         calls.append(1)
         if len(calls) == 2:
             raise RuntimeError("the engine fell over")
-        real_probe(*args)  # type: ignore[arg-type]
+        real_probe(*args)
 
     monkeypatch.setattr(fuzz, "_probe", failing_probe)
     r = fuzz.run_fuzz("grbl", 3, seed=3, link="ideal", faults=fuzz.Faults(outside_rate=0.01))
@@ -83,3 +86,24 @@ def test_a_feed_hold_that_grblhal_ignores_in_jog_is_no_outside_stop(
     assert hal.outside_stopped_nothing > 0
     grbl = fuzz.run_fuzz("grbl", 12, seed=5, link="ideal", faults=faults)
     assert grbl.outside_stops > 0
+
+
+def test_an_outside_cancel_counts_as_stopping_nothing_only_if_it_threw_nothing_away() -> None:
+    # The simulator's record of each cancel (steps left unrun, lines dropped) decides: a cancel
+    # that struck a machine braking into the end of what it held changed nothing anyone could
+    # see, so a held stick jogging on afterwards is no restart; one that threw motion away is.
+    def session(log: list[tuple[float, int, int]]) -> Any:
+        rig = SimpleNamespace(clock_ratio=1.0, firmware=SimpleNamespace(cancel_log=log))
+        return SimpleNamespace(vs=SimpleNamespace(rig=rig))
+
+    assert fuzz._threw_nothing_away(session([(10.2, 0, 0)]), 10.0, 10.2)
+    assert fuzz._threw_nothing_away(session([(10.2, 1, 0)]), 10.0, 10.2)
+    assert not fuzz._threw_nothing_away(session([(10.2, 40, 0)]), 10.0, 10.2)
+    assert not fuzz._threw_nothing_away(session([(10.2, 0, 1)]), 10.0, 10.2)
+    assert not fuzz._threw_nothing_away(session([]), 10.0, 10.2)
+    # A cancel that ended before the event, or long after the rest, is not this one.
+    assert not fuzz._threw_nothing_away(session([(9.9, 0, 0)]), 10.0, 10.2)
+    assert not fuzz._threw_nothing_away(session([(10.5, 0, 0)]), 10.0, 10.2)
+    # Two cancels ended the motion and one of them threw steps away: it stopped something.
+    both = session([(10.1, 0, 0), (10.2, 30, 0)])
+    assert not fuzz._threw_nothing_away(both, 10.0, 10.2)

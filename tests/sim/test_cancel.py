@@ -317,3 +317,38 @@ def test_jog_soft_limit_clipping_by_firmware(
     assert host.reply(line) == expected_reply
     host.wait_state("Idle", timeout_s=60)
     assert mpos(host.status())[0] == pytest.approx(expected_x)
+
+
+def test_each_jog_cancel_records_what_it_threw_away() -> None:
+    # The record is the benches' ground truth (the firmware keeps none): a cancel of a jog in
+    # full flow leaves planned steps unrun; on grblHAL the lines in RX are dropped too.
+    host = Host()
+    stream_jogs(host, 25)
+    host.send(b"\x85")
+    finish(host)
+    [(_t, unrun, dropped)] = host.fw.cancel_log
+    assert unrun > 250  # over a millimetre of planned X left (250 steps/mm)
+    assert dropped == 0  # Grbl 1.1h keeps its RX buffer (firmware-facts §3.1)
+    hal = Host("grblhal")
+    stream_jogs(hal, 150, rx_size=1024)
+    hal.send(b"\x85")
+    finish(hal)
+    [(_t, unrun, dropped)] = hal.fw.cancel_log
+    assert unrun > 0
+    assert dropped > 5
+
+
+def test_a_jog_cancel_that_strikes_the_last_braking_throws_nothing_away() -> None:
+    # One jog braking into its end when the 0x85 comes: the cancel brakes no harder than the
+    # planner already did, so it leaves nothing unrun (within a step).
+    host = Host()
+    assert host.reply("$J=G91X2F300") == "ok"
+    # 2 mm at 5 mm/s with Grbl's default 10 mm/s² ($120): it brakes over the last 1.25 mm;
+    # strike late in that braking.
+    while mpos(host.status())[0] < 1.9:
+        host.run(0.005)
+    host.send(b"\x85")
+    finish(host)
+    [(_t, unrun, dropped)] = host.fw.cancel_log
+    assert unrun <= 1
+    assert dropped == 0

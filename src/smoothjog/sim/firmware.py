@@ -328,6 +328,11 @@ class GrblFirmware:
         self._steps: deque[_Step] = deque()
         self._line_buf = bytearray()
         self._held_line: bytes | None = None
+        #: What each jog cancel threw away, for test benches (the firmware keeps no such
+        #: record): (time its stop completed, steps of planned motion left unrun on the
+        #: busiest axis, lines dropped unread since the cancel began).
+        self.cancel_log: list[tuple[float, int, int]] = []
+        self._lines_dropped = 0
         self._overrides = _Overrides()
         # Override requests are flags, as in the firmware: one raised twice before the main loop
         # services it counts once (firmware-facts §5.2).
@@ -571,6 +576,7 @@ class GrblFirmware:
         self.rx.clear()
         self._line_buf.clear()
         self._held_line = None
+        self._lines_dropped = 0
         self.motion.kill()
         self.motion.set_overrides(100, 100, now_s)  # sys.f_override and r_override back to 100
         self.parser = self.parser.after_reset().with_position(self._mpos_single_mm())
@@ -633,6 +639,7 @@ class GrblFirmware:
         elif kind is Realtime.JOG_CANCEL:
             if self.profile.facts.jog_cancel.flushes_rx:
                 # grblHAL: the input buffer and a half-read line are dropped in any state (§7).
+                self._lines_dropped += self.rx.line_ends() + bool(self._line_buf)
                 self.rx.clear()
                 self._line_buf.clear()
             # The state test happens here, at arrival, not when the flag is serviced (§3.1).
@@ -1013,6 +1020,7 @@ class GrblFirmware:
         head = self._steps[0] if self._steps else None
         if isinstance(head, _Plan) and head.jog:
             head.dropped = True
+            self._lines_dropped += 1
 
     def _cycle_start(self, flags: int, now_s: float) -> None:
         """`~` and auto cycle start: resume a completed hold or door, start queued blocks."""
@@ -1053,6 +1061,8 @@ class GrblFirmware:
             # plan_reset + st_reset + gc_sync_position + plan_sync_position. The blocked line
             # and the RX ring are left alone: that is the ghost jog of firmware-facts §3.1.
             self._exec_hold = False
+            self.cancel_log.append((now_s, self.motion.unrun_steps(), self._lines_dropped))
+            self._lines_dropped = 0
             self.motion.clear_after_stop()
             self.parser = self.parser.with_position(self._mpos_single_mm())
             # st_reset calls st_go_idle once more: a second $1 delay, still in state Jog.

@@ -379,6 +379,13 @@ class Motion:
         self._planner_steps = self._machine_steps
         self._prev_nominal_mm_s = 0.0
 
+    def unrun_steps(self) -> int:
+        """Steps between the machine and the end of what is planned, on the busiest axis."""
+        return max(
+            (abs(p - m) for p, m in zip(self._planner_steps, self.position_steps(), strict=True)),
+            default=0,
+        )
+
     def kill(self) -> None:
         """Stop at once (soft reset): everything queued is lost; the position is kept."""
         self._machine_steps = self.position_steps()

@@ -58,6 +58,10 @@ class RxRing:
         """Whether a complete line (ended by \\n or \\r) is waiting."""
         return 0x0A in self._bytes or 0x0D in self._bytes
 
+    def line_ends(self) -> int:
+        """How many line ends (\\n or \\r) are waiting."""
+        return sum(1 for byte in self._bytes if byte in (0x0A, 0x0D))
+
     def clear(self) -> None:
         """Drop everything waiting (a soft reset, or grblHAL's 0x85)."""
         self._bytes.clear()
