@@ -56,8 +56,8 @@ OUTSIDE_EVENTS: dict[str, bytes | None] = {
     "soft reset": b"\x18",
     "stall": None,
 }
-#: A jog cancel's stop completes once the machine is at rest and the step-idle delay ($1 ms,
-#: none at 255) has passed (firmware-facts §3.7); this much later than that still counts.
+#: The simulator stamps each cancel with the machine's rest (not the end of the firmware's $1
+#: delay after it); a record this much later than the rest seen in the trace still counts.
 CANCEL_END_SLACK_S = 0.005
 #: How long an injected stall lasts: a uniform draw from this range (s).
 STALL_RANGE_S = (0.1, 0.6)
@@ -536,15 +536,10 @@ def _threw_nothing_away(session: _Session, t_s: float, rest_s: float) -> bool:
     any did, or none ended there."""
     rig = session.vs.rig
     ratio = rig.clock_ratio
-    idle_ms = rig.firmware.settings.int_value(1)
-    # The firmware finishes the cancel after st_go_idle's delay, not at the rest itself: a
-    # window that closed at the rest missed every cancel that ended a motion (a held stick's
-    # next run after one then counted as a restart, 17 mm over the grblHAL Wi-Fi row).
-    end_s = rest_s + (idle_ms / 1000.0 if idle_ms != 255 else 0.0) + CANCEL_END_SLACK_S
     ended = [
         (unrun, dropped)
         for at_s, unrun, dropped in rig.firmware.cancel_log
-        if t_s < at_s / ratio <= end_s
+        if t_s < at_s / ratio <= rest_s + CANCEL_END_SLACK_S
     ]
     return bool(ended) and all(unrun <= 1 and dropped == 0 for unrun, dropped in ended)
 

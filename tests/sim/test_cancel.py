@@ -349,6 +349,9 @@ def test_a_jog_cancel_that_strikes_the_last_braking_throws_nothing_away() -> Non
         host.run(0.005)
     host.send(b"\x85")
     finish(host)
-    [(_t, unrun, dropped)] = host.fw.cancel_log
+    [(rest_s, unrun, dropped)] = host.fw.cancel_log
     assert unrun <= 1
     assert dropped == 0
+    # Stamped with the rest the motion trace shows, not with the end of the $1 delay (25 ms)
+    # after it, when the firmware finishes the cancel: a bench matches the two.
+    assert rest_s == host.fw.motion.trace[-1].t1_s

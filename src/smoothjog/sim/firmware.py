@@ -329,9 +329,12 @@ class GrblFirmware:
         self._line_buf = bytearray()
         self._held_line: bytes | None = None
         #: What each jog cancel threw away, for test benches (the firmware keeps no such
-        #: record): (time its stop completed, steps of planned motion left unrun on the
-        #: busiest axis, lines dropped unread since the cancel began).
+        #: record): (time the machine came to rest, steps of planned motion left unrun on the
+        #: busiest axis, lines dropped unread since the cancel began). The firmware finishes
+        #: the cancel $1 ms after that rest (firmware-facts §3.7); a bench compares the record
+        #: with the rest it sees in the motion trace, so the rest is what it is stamped with.
         self.cancel_log: list[tuple[float, int, int]] = []
+        self._ran_out_s = 0.0  # when the steppers last ran out (the stepper ISR's cycle stop)
         self._lines_dropped = 0
         self._overrides = _Overrides()
         # Override requests are flags, as in the firmware: one raised twice before the main loop
@@ -733,6 +736,7 @@ class GrblFirmware:
         for event_s, name in events:
             if name == CYCLE_STOP:
                 self._rt |= EXEC_CYCLE_STOP
+                self._ran_out_s = event_s
                 self._step_idle_delay(event_s)
 
     def _step_idle_delay(self, t_s: float) -> None:
@@ -1061,7 +1065,9 @@ class GrblFirmware:
             # plan_reset + st_reset + gc_sync_position + plan_sync_position. The blocked line
             # and the RX ring are left alone: that is the ghost jog of firmware-facts §3.1.
             self._exec_hold = False
-            self.cancel_log.append((now_s, self.motion.unrun_steps(), self._lines_dropped))
+            self.cancel_log.append(
+                (self._ran_out_s, self.motion.unrun_steps(), self._lines_dropped)
+            )
             self._lines_dropped = 0
             self.motion.clear_after_stop()
             self.parser = self.parser.with_position(self._mpos_single_mm())
