@@ -866,6 +866,12 @@ class Jogger:
         if self._wake_at_s is not None and now_s > self._wake_at_s:
             # Woken late for a planned top-up (a busy host, a slow timer): the queue drained
             # that much further, so it is sized for the late end of such wake-ups as well.
+            # Only late ones are counted, so this is a percentile of the late ones: counting
+            # wake-ups on time as 0 took the margin to 0 on a virtual clock and shortened the
+            # FTDI coast (S4) from 1.55 to 1.49 x v²/2a, but it let slow jogs over the Wi-Fi
+            # bridge run dry in its round trips' slow tail, and each dry queue's FS:0 read as
+            # an outside stop (2 false alarms in 150 fault-free sequences, none before; see
+            # bench/results/links.md, "Tried and not kept").
             self._late_s.add(now_s - self._wake_at_s)
             ranked = self._late_s.ranked
             self._lateness_s = ranked[(9 * len(ranked)) // 10]
