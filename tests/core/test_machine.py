@@ -184,15 +184,33 @@ def test_unknown_planner_size_assumes_the_smallest(banner: str | None) -> None:
     ("reports", "usable"),
     [
         # Idle with an empty planner shows every usable block: it lowers [OPT:]'s 35 ...
-        (["<Idle|MPos:0,0,0|Bf:34,1024>"], 34),
+        (["<Idle|MPos:0.000,0.000,0.000|Bf:34,1024>"], 34),
         # ... and raises it.
-        (["<Idle|MPos:0,0,0|Bf:40,1024>"], 40),
+        (["<Idle|MPos:0.000,0.000,0.000|Bf:40,1024>"], 40),
         # The largest Idle value wins: a momentary lower one does not undo it.
-        (["<Idle|MPos:0,0,0|Bf:34,1024>", "<Idle|MPos:0,0,0|Bf:30,1024>"], 34),
-        (["<Idle|MPos:0,0,0|Bf:30,1024>", "<Idle|MPos:0,0,0|Bf:34,1024>"], 34),
+        (
+            [
+                "<Idle|MPos:0.000,0.000,0.000|Bf:34,1024>",
+                "<Idle|MPos:0.000,0.000,0.000|Bf:30,1024>",
+            ],
+            34,
+        ),
+        (
+            [
+                "<Idle|MPos:0.000,0.000,0.000|Bf:30,1024>",
+                "<Idle|MPos:0.000,0.000,0.000|Bf:34,1024>",
+            ],
+            34,
+        ),
         # Outside Idle the planner may hold blocks: such a Bf says nothing about its size.
-        (["<Jog|MPos:0,0,0|Bf:10,1024>", "<Hold:0|MPos:0,0,0|Bf:2,1024>"], 35),
-        (["<Run|MPos:0,0,0|Bf:36,1024>"], 35),
+        (
+            [
+                "<Jog|MPos:0.000,0.000,0.000|Bf:10,1024>",
+                "<Hold:0|MPos:0.000,0.000,0.000|Bf:2,1024>",
+            ],
+            35,
+        ),
+        (["<Run|MPos:0.000,0.000,0.000|Bf:36,1024>"], 35),
     ],
 )
 def test_idle_bf_sets_the_usable_blocks(reports: list[str], usable: int) -> None:
@@ -204,11 +222,11 @@ def test_idle_bf_sets_the_usable_blocks(reports: list[str], usable: int) -> None
 def test_a_reboot_forgets_the_idle_bf() -> None:
     """After a banner the planner may have been resized ($398 takes effect on reboot, §7)."""
     model = feed(MachineModel(), "", GRBLHAL_BANNER, "[OPT:VNMSL,35,1024]", "ok")
-    feed(model, "<Idle|MPos:0,0,0|Bf:40,1024>")
+    feed(model, "<Idle|MPos:0.000,0.000,0.000|Bf:40,1024>")
     assert model.planner_usable_blocks == 40
     feed(model, "", GRBLHAL_BANNER)
     assert model.planner_usable_blocks == 35
-    feed(model, "<Idle|MPos:0,0,0|Bf:30,1024>")
+    feed(model, "<Idle|MPos:0.000,0.000,0.000|Bf:30,1024>")
     assert model.planner_usable_blocks == 30
 
 

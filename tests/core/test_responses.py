@@ -363,6 +363,12 @@ def test_status_unknown_fields_survive() -> None:
         (b"<Id#le|MPos:0,0,0>", "state"),
         (b"<>", "truncated"),
         (b"<Idle|MPos:1,2,3,4,5,6,7,8,9,10>", "MPos"),
+        # A byte lost or flipped on the wire: the firmware prints every coordinate with its
+        # decimal point and the same decimals (the noise fuzz's `-406075` for `-406.075`).
+        (b"<Idle|MPos:-406075,-364.900,-14.750|FS:0,0>", "decimals"),
+        (b"<Idle|MPos:-406.075,-364.900,-14.75|FS:0,0>", "decimals"),
+        (b"<Idle|MPos:-406.075,-364.900,-14.750|FS:0,0|WCO:0.000,0.00,0.000>", "decimals"),
+        (b"<Idle|WPos:1.000,2.000,3>", "decimals"),
         (b"[MSG:Reset to cont", "truncated"),
         (b"[GC:G0 G54 X1]", "GC"),
         (b"[PRB:0.000,0.000,1.492]", "PRB"),

@@ -326,6 +326,39 @@ def _parse_numbers(text: str, what: str, lo: int, hi: int) -> tuple[float, ...]:
     return tuple(_parse_number(p, what) for p in parts)
 
 
+#: A coordinate as the firmware prints one: always with a decimal point and a fixed number of
+#: decimals (3 in mm, 4 in inches: firmware-facts §5.4).
+_COORD = re.compile(r"[+-]?\d+\.(\d+)")
+
+
+def _parse_coords(text: str, what: str, decimals: list[int]) -> tuple[float, ...]:
+    """MPos, WPos or WCO: 1 to _MAX_AXES coordinates, each with the decimals of every other
+    coordinate of the report (decimals holds the count seen first, or is empty).
+
+    The firmware prints every coordinate with the same decimals, so one without a decimal
+    point, or with another count of decimals, is a line a byte was lost from or flipped in on
+    the wire (`-406075` for `-406.075`): taken as read, it would put the machine 400 m away.
+    """
+    parts = text.split(",")
+    if not 1 <= len(parts) <= _MAX_AXES:
+        raise _MalformedLineError(f"{what} has {len(parts)} values, expected 1 to {_MAX_AXES}")
+    values: list[float] = []
+    for part in parts:
+        match = _COORD.fullmatch(part)
+        if match is None:
+            raise _MalformedLineError(f"{what} {part!r} is not a coordinate with decimals")
+        count = len(match.group(1))
+        if not decimals:
+            decimals.append(count)
+        elif count != decimals[0]:
+            raise _MalformedLineError(
+                f"{what} {part!r} has {count} decimals where the report's others have"
+                f" {decimals[0]} (a byte lost or changed on the wire?)"
+            )
+        values.append(float(part))
+    return tuple(values)
+
+
 def _parse_ints(text: str, what: str, count: int) -> tuple[int, ...]:
     """Exactly count comma-separated whole numbers."""
     parts = text.split(",")
@@ -362,16 +395,17 @@ def _parse_status(text: str) -> StatusReport:
     overrides: tuple[int, int, int] | None = None
     accessories: str | None = None
     extras: list[tuple[str, str]] = []
+    decimals: list[int] = []  # of the report's coordinates, all alike (see _parse_coords)
     for field in fields[1:]:
         name, sep, value = field.partition(":")
         if name == "" or (not sep and name in _VALUED_FIELDS):
             raise _MalformedLineError(f"status field {field!r} has no name or no value")
         if name == "MPos":
-            mpos = _parse_numbers(value, "MPos", 1, _MAX_AXES)
+            mpos = _parse_coords(value, "MPos", decimals)
         elif name == "WPos":
-            wpos = _parse_numbers(value, "WPos", 1, _MAX_AXES)
+            wpos = _parse_coords(value, "WPos", decimals)
         elif name == "WCO":
-            wco = _parse_numbers(value, "WCO", 1, _MAX_AXES)
+            wco = _parse_coords(value, "WCO", decimals)
         elif name == "Bf":
             planner_free, rx_free = _parse_ints(value, "Bf", 2)
             buffer = (planner_free, rx_free)
