@@ -1067,6 +1067,8 @@ class Jogger:
         if move is None:
             return
         self._commanded = move
+        if not self._track.path:
+            self._start_from_newest_report(now_s)
         n_blocks = self.limits.planner_blocks
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
         block_s = self._block_s(move)
@@ -1112,6 +1114,23 @@ class Jogger:
             if not self._send_increment(move, length_mm, now_s, out):
                 return
             blocks += 1
+
+    def _start_from_newest_report(self, now_s: float) -> None:
+        """Nothing is sent yet in this run: start its path where the newest report puts the
+        machine, which is at rest.
+
+        A report damaged on the wire in a way its format cannot show (a lost `-`: X 284.013 on
+        a machine at -284.013, noise fuzz, Grbl over the Wi-Fi bridge) puts the model outside the
+        travel. No line fits from there, and a run begun there stood for good, a held stick
+        doing nothing and saying nothing; the next report now puts the path right.
+        """
+        mpos = self.model.mpos_mm
+        if mpos is None or len(mpos) != len(self.limits.axes):
+            return
+        start = self._track.on_step_grid(mpos)
+        if start != self._track.end_mm:
+            self._track.begin(start, now_s)
+            self._cruise = None
 
     def _run_time_s(self, now_s: float, dist_mm: float, move: inc.VectorMove) -> float | None:
         """When the machine will have run dist_mm further, at the faster of its estimated and
@@ -1160,6 +1179,8 @@ class Jogger:
             # than two steps is taken for an outside stop).
             end = g91_end(start, deltas)
             if not self._fits_envelope(end):
+                if not self._track.path and not self._fits_envelope(start):
+                    self._tell_outside_travel(start)
                 return False
         if self.limits.keepouts and not self._ghost_clear(deltas):
             # Sent now, this line would run from wherever an outside stop left the machine
@@ -1629,6 +1650,22 @@ class Jogger:
             )
         )
         return math.copysign(short_mm, dist_mm)
+
+    def _tell_outside_travel(self, start: Vec) -> None:
+        """Say once per stick position that no jog fits from where the controller reports the
+        machine: outside its soft-limit travel (or a report damaged on the wire)."""
+        if self._intent is None or self._edge_told is self._intent:
+            return
+        self._edge_told = self._intent
+        self.events.append(
+            EngineEvent(
+                self._track.est_s,
+                "info",
+                "no jog fits from where the controller reports the machine"
+                f" ({self._where_blocked(start)}): that is outside the soft limits",
+                "if the report was right, move back inside with soft limits off ($20=0) or home",
+            )
+        )
 
     def _where_blocked(self, start: Vec) -> str:
         """Where the machine is, for a message about an edge."""
