@@ -475,7 +475,7 @@ STATUS_ROWS = [
             ("Check", "the controller is in check mode"),
             ("Home", "the controller is homing"),
             ("Sleep", "the controller is asleep"),
-            ("Tool", "Tool"),
+            ("Tool", "the controller is in state Tool"),
         ]
     ],
     row(

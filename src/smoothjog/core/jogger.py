@@ -45,6 +45,7 @@ from smoothjog.core.ledger import ENGINE, Entry, Ledger, line_cost_bytes
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import (
+    KNOWN_STATES,
     AlarmReply,
     Banner,
     ErrorReply,
@@ -156,6 +157,21 @@ _STATE_REASONS = {
     "Home": "the controller is homing: jogging waits until it is done",
     "Sleep": "the controller is asleep: reset it to wake it",
 }
+
+
+def _state_reason(state: str) -> str:
+    """Why no jog goes in this state, in words."""
+    reason = _STATE_REASONS.get(state)
+    if reason is not None:
+        return reason
+    if state not in KNOWN_STATES:
+        # A state no firmware has is most often a report damaged on the wire (`Joc`, `Idne`
+        # in the noise fuzz); stopping is still right, since the report says nothing else.
+        return (
+            f"the controller reported the state {state!r}, which no firmware has"
+            " (a report damaged on the wire?)"
+        )
+    return f"the controller is in state {state}"
 
 
 # ------------------------------------------------------------------------------------ outputs
@@ -2119,7 +2135,7 @@ class Jogger:
         if state not in JOG_STATES and state != "Run":
             self._fresh_status_wanted = False
             if self.phase is not Phase.IDLE:
-                self._fault_now(now_s, f"jogging stopped: {_STATE_REASONS.get(state, state)}", "")
+                self._fault_now(now_s, f"jogging stopped: {_state_reason(state)}", "")
                 self._abandon_motion()
             return lead_mm
         if state == "Idle" and fresh:
@@ -2723,7 +2739,7 @@ class Jogger:
         if state is None:
             return False, "waiting for the controller's first status report"
         if state not in JOG_STATES:
-            return False, _STATE_REASONS.get(state, f"the controller is in state {state}")
+            return False, _state_reason(state)
         if self.limits.envelope is not None and self.model.looks_unhomed():
             return False, (
                 "soft limits are on but the machine looks unhomed (MPos is 0,0,0, so every jog "
