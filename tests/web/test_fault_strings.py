@@ -579,7 +579,8 @@ SAMPLES: dict[str, Any] = {
     "jogger.lag_mm": [1.5],
     "jogger.unread_ms": [102.4, 1500.0],
     "jogger.pressed": _pin_names,
-    "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool"],
+    # Tool has no sentence of its own; Joc is no firmware's (a report damaged on the wire).
+    "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool", "Joc"],
     "jogger._outside_stop.how": _outside_hows,
     "jogger._rested_inside_a_block.rest_mm": [12.5],
     "jogger._rested_inside_a_block.seg": [SimpleNamespace(x1_mm=13.74)],
