@@ -886,8 +886,8 @@ class Jogger:
             # wake-ups on time as 0 took the margin to 0 on a virtual clock and shortened the
             # FTDI coast (S4) from 1.55 to 1.49 x v²/2a, but it let slow jogs over the Wi-Fi
             # bridge run dry in its round trips' slow tail, and each dry queue's FS:0 read as
-            # an outside stop (2 false alarms in 150 fault-free sequences, none before; see
-            # bench/results/links.md, "Tried and not kept").
+            # an outside stop (3 false alarms over the bridge in the fault-free fuzz, none
+            # before; see bench/results/links.md, "Tried and not kept").
             self._late_s.add(now_s - self._wake_at_s)
             ranked = self._late_s.ranked
             self._lateness_s = ranked[(9 * len(ranked)) // 10]
@@ -1196,7 +1196,13 @@ class Jogger:
             end = g91_end(start, deltas)
             if not self._fits_envelope(end):
                 if not self._track.path and not self._fits_envelope(start):
-                    self._tell_outside_travel(start)
+                    # Outside the soft-limit travel (or a report damaged on the wire).
+                    self._tell_once_per_stick(
+                        "no jog fits from where the controller reports the machine"
+                        f" ({self._where_blocked(start)}): that is outside the soft limits",
+                        "if the report was right, move back inside with soft limits off"
+                        " ($20=0) or home",
+                    )
                 return False
         if self.limits.keepouts and not self._ghost_clear(deltas):
             # Sent now, this line would run from wherever an outside stop left the machine
@@ -1234,18 +1240,12 @@ class Jogger:
         """Clip, round and write one increment; the cruise to repeat it, when it may be."""
         clipped = self._clip(start, move, length_mm)
         if clipped is None:
-            if self._intent is not None and self._edge_told is not self._intent:
-                # The stick is still held but there is no room left that way: say why the
-                # machine stands, once for this stick position.
-                self._edge_told = self._intent
-                self.events.append(
-                    EngineEvent(
-                        self._track.est_s,
-                        "info",
-                        f"the jog stops at {self._blocked_by} ({self._where_blocked(start)})",
-                        "jog another way, or change the limits if they are wrong",
-                    )
-                )
+            # The stick is still held but there is no room left that way: say why the machine
+            # stands.
+            self._tell_once_per_stick(
+                f"the jog stops at {self._blocked_by} ({self._where_blocked(start)})",
+                "jog another way, or change the limits if they are wrong",
+            )
             return None
         clipped_move, clipped_mm = clipped
         deltas: dict[str, float] = {}
@@ -1667,21 +1667,12 @@ class Jogger:
         )
         return math.copysign(short_mm, dist_mm)
 
-    def _tell_outside_travel(self, start: Vec) -> None:
-        """Say once per stick position that no jog fits from where the controller reports the
-        machine: outside its soft-limit travel (or a report damaged on the wire)."""
+    def _tell_once_per_stick(self, text: str, hint: str) -> None:
+        """Say why a held stick moves nothing, once for this stick position."""
         if self._intent is None or self._edge_told is self._intent:
             return
         self._edge_told = self._intent
-        self.events.append(
-            EngineEvent(
-                self._track.est_s,
-                "info",
-                "no jog fits from where the controller reports the machine"
-                f" ({self._where_blocked(start)}): that is outside the soft limits",
-                "if the report was right, move back inside with soft limits off ($20=0) or home",
-            )
-        )
+        self.events.append(EngineEvent(self._track.est_s, "info", text, hint))
 
     def _where_blocked(self, start: Vec) -> str:
         """Where the machine is, for a message about an edge."""
