@@ -12,6 +12,7 @@ import pytest
 
 from smoothjog.core.intents import ContinuousIntent, StopIntent
 from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import GRBL, FirmwareProfile
 from smoothjog.sim.rig import LINK_MODELS, SimRig
 from smoothjog.virtual import VirtualHost
 
@@ -19,8 +20,16 @@ V_MM_S = 5000 / 60
 BLOCK_S = 0.0105  # the engine's shortest block: one increment at full speed is v x this
 
 
-def _jogging(link: str, speed: float, machine: str = "hobby-router", seed: int = 0) -> VirtualHost:
-    rig = SimRig(GrblFirmware(machine=machine), dataclasses.replace(LINK_MODELS[link], seed=seed))
+def _jogging(
+    link: str,
+    speed: float,
+    machine: str = "hobby-router",
+    seed: int = 0,
+    profile: FirmwareProfile = GRBL,
+) -> VirtualHost:
+    rig = SimRig(
+        GrblFirmware(profile, machine=machine), dataclasses.replace(LINK_MODELS[link], seed=seed)
+    )
     rig.host_send(b"$20=0\n", 0.0)  # soft limits off: the runs here are long
     vs = VirtualHost(rig)
     vs.handshake()
@@ -113,3 +122,56 @@ def test_a_reset_with_jog_lines_unanswered_is_followed_at_once_by_a_cancel() -> 
     assert b"\x85" in after[: after.index(b"$I\n")]
     assert vs.engine is not None
     assert any("the controller was reset" in e.text for e in vs.events)
+
+
+STOP_MM = V_MM_S**2 / (2 * 500.0)  # hobby-router: v²/2a at full speed
+#: What Grbl 1.1h's five prepared segments can hold with 10.5 ms blocks (increments.committed_s).
+COMMITTED_S = 0.031
+
+
+def _cruise(vs: VirtualHost, seconds: float) -> tuple[list[float], float]:
+    """Hold on for `seconds`, sampling every 2 ms: the distance the controller has queued
+    ahead of the machine, and the machine's lowest speed over the hold (ground truth)."""
+    motion = vs.rig.firmware.motion
+    start_s = vs.now_s
+    queued: list[float] = []
+    while vs.now_s < start_s + seconds:
+        vs.run_until(vs.now_s + 0.002)
+        queued.append(abs(motion.planner_position_mm()[0] - motion.position_mm()[0]))
+    lowest = min(
+        seg.speed_mm_s for seg in vs.rig.trace if seg.t0_s >= start_s and seg.t1_s <= vs.now_s
+    )
+    return queued, lowest
+
+
+def test_on_an_ftdi_link_the_queue_holds_what_a_line_needs_to_arrive_not_the_round_trip() -> None:
+    # The FTDI adapter holds replies for its 16 ms latency timer, while a line reaches the
+    # controller within a 1 ms USB frame. Status reports of the cruise tell the two ways apart
+    # (core/linksplit.py): the queue beyond v²/2a and the committed segments is then a line's
+    # wire time and jitter, not a whole round trip of ~19 ms.
+    vs = _jogging("ftdi", 1.0)
+    vs.run_until(vs.now_s + 2.0)  # the split needs a cruise's reports first
+    queued, lowest = _cruise(vs, 2.0)
+    assert vs.engine is not None
+    assert vs.engine._rtt_hi_s > 0.015
+    # Sized for the round trip, the queue ran 12.8-13.6 ms beyond them on average (seeds 0-2);
+    # sized by the split, 7.9-8.4 ms (half of it the sawtooth of one 10.5 ms block).
+    mean_lead_s = (sum(queued) / len(queued) - STOP_MM) / V_MM_S - COMMITTED_S
+    assert mean_lead_s < 0.0105, mean_lead_s
+    assert lowest >= 0.98 * V_MM_S  # and the machine never slowed for it
+    assert [e.text for e in vs.events if e.kind == "fault"] == []
+
+
+@pytest.mark.parametrize("link", ["ideal", "ftdi", "ch340"])
+@pytest.mark.parametrize("line_time_s", [0.005, 0.008])
+def test_a_controller_slow_to_plan_lines_gets_the_queue_it_needs(
+    link: str, line_time_s: float
+) -> None:
+    # A status report is answered at once, a line only once it is parsed and planned: the
+    # reports' split must not make the queue forget that time. 5 ms is the slow end assumed for
+    # Grbl 1.1h on an AVR; 20 ms stands for lines held up behind someone else's in the RX buffer.
+    vs = _jogging(link, 1.0, profile=dataclasses.replace(GRBL, line_time_s=line_time_s))
+    vs.run_until(vs.now_s + 2.0)
+    _queued, lowest = _cruise(vs, 2.0)
+    assert lowest >= 0.98 * V_MM_S
+    assert [e.text for e in vs.events if e.kind == "fault"] == []

@@ -64,7 +64,7 @@ def test_slow_round_trips_lengthen_the_queue_and_the_blocks() -> None:
     rx_lines = 128 // line_bytes - 1
     assert _increment_mm(h.jog_lines()[-2]) / V_MM_S >= 0.1 / rx_lines - 1e-5  # 4 decimals
     # And the queue bridges that round trip beyond the stopping distance.
-    target_mm = inc.queue_target_mm(V_MM_S, A_MM_S2, engine._ahead_s(0.0105))
+    target_mm = inc.queue_target_mm(V_MM_S, A_MM_S2, engine._ahead_s(0.0105, h.t))
     assert target_mm >= V_MM_S**2 / (2 * A_MM_S2) + V_MM_S * 0.1
 
 
@@ -110,5 +110,48 @@ def test_a_host_that_wakes_late_gets_a_longer_queue() -> None:
         late.poll()
     assert late.engine._lateness_s >= 0.0039
     assert on_time.engine._lateness_s <= 0.002
-    grown_s = late.engine._ahead_s(0.0105) - on_time.engine._ahead_s(0.0105)
+    grown_s = late.engine._ahead_s(0.0105, late.t) - on_time.engine._ahead_s(0.0105, on_time.t)
     assert grown_s >= 0.0035
+
+
+def test_lines_slower_to_be_answered_than_reports_keep_the_queue_for_their_round_trip() -> None:
+    # Every `?` answered at once with the machine where the engine expects it (a cruise the link
+    # split reads as an instant way out), every line 30 ms after it was sent: the controller is
+    # slow to take lines (a slow parser, or lines queued behind someone else's in its RX
+    # buffer). The queue must still span those 30 ms, whatever the reports say of the wire.
+    h = EngineHarness()
+    h.rest_at(START_MPOS)
+    h.intent(HELD)
+    answers: list[float] = []
+    report_due_s: float | None = None
+    moving_from_s: float | None = None  # the first line planned: the machine starts
+    end_s = h.t + 3.0
+    while h.t < end_s:
+        h.advance(0.002)
+        while answers and answers[0] <= h.t:
+            answers.pop(0)
+            h.ok()
+            if moving_from_s is None:
+                moving_from_s = h.t
+        if report_due_s is not None and report_due_s <= h.t:
+            # Built as the `?` arrives, where the machine is: at rest, speeding up, cruising.
+            report_due_s = None
+            run_s = h.t - moving_from_s if moving_from_s is not None else 0.0
+            if run_s <= 0.0:
+                h.status("Idle", START_MPOS)
+            elif run_s < V_MM_S / A_MM_S2:
+                x_mm = START_MPOS[0] - 0.5 * A_MM_S2 * run_s**2
+                h.status("Jog", (x_mm, *START_MPOS[1:]), fs=(round(A_MM_S2 * run_s * 60), 0))
+            else:
+                x_mm = START_MPOS[0] - V_MM_S * (run_s - V_MM_S / (2 * A_MM_S2))
+                h.status("Jog", (x_mm, *START_MPOS[1:]), fs=(5000, 0))
+        out = h.poll()
+        answers += [h.t + 0.030] * sum(1 for o in out if not isinstance(o, SendRealtime))
+        if any(getattr(o, "byte", None) == STATUS_QUERY for o in out):
+            report_due_s = h.t + 0.004
+    split = h.engine._split
+    assert split.ready
+    spread_s = split.spread_s()
+    assert spread_s is not None
+    assert spread_s < 0.003  # the reports show a quick, steady way out
+    assert h.engine._queue_rtt_s(h.t) >= 0.029

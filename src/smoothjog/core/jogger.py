@@ -42,6 +42,7 @@ from smoothjog.core.intents import (
 )
 from smoothjog.core.jogline import MM_DECIMALS, build_jog_line, format_number
 from smoothjog.core.ledger import ENGINE, Entry, Ledger, line_cost_bytes
+from smoothjog.core.linksplit import LinkSplit
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY
 from smoothjog.core.responses import (
@@ -127,6 +128,8 @@ SLIDE_MIN_SHARE = 0.05
 #: Repeats of one increment before its run is worked out afresh from where the firmware put
 #: the last target: 16 lines drift at most 8 ulps off the ray, 0.001 mm within 2048 mm.
 CRUISE_LINES = 16
+#: A report's FS is the feed rounded to whole mm/min (Grbl prints it with no decimals).
+FEED_PRINT_MM_MIN = 0.5
 #: Jog-line latencies the round-trip estimate looks at.
 RTT_WINDOW = 64
 #: How long a round trip far above the usual (a stall) keeps the queue long.
@@ -559,6 +562,14 @@ class Jogger:
         self._rtt_hi_s = self._rtt_s  # what the queue and the lines in flight are sized for
         #: Decreasing latencies of the last RTT_MEMORY_S (a sliding maximum), oldest first.
         self._rtt_peaks: deque[tuple[float, float]] = deque()
+        #: A stall of the last RTT_MEMORY_S sizes the queue (_rtt_hi_s is that peak).
+        self._stall_sized = False
+        #: The way out and the way back, told apart by the reports of a cruise.
+        self._split = LinkSplit()
+        #: When the engine's bytes written so far have all left the host, at the wire's rate.
+        self._wire_free_s = -math.inf
+        #: How long the last `?` waited behind the engine's own lines (see _poll_status).
+        self._status_backlog_s = 0.0
         self._byte_s = self.tuning.byte_s or BITS_PER_BYTE_8N1 / DEFAULT_BAUD
         self._line_bytes = JOG_LINE_BYTES
         self._last_report_bytes = 50  # a Grbl 1.1 report with MPos, FS and Pn
@@ -1017,7 +1028,7 @@ class Jogger:
         self._rest_inside = None
         self._prev_jog_report = None
 
-    def _ahead_s(self, block_s: float) -> float:
+    def _ahead_s(self, block_s: float, now_s: float) -> float:
         """Queue time beyond the stopping distance: committed segments, round trip, one tick.
 
         The firmware commits segments of the blocks already queued, so the longest of those
@@ -1025,7 +1036,34 @@ class Jogger:
         """
         longest_s = self._track.longest_queued_s(block_s)
         committed = min(inc.committed_s(longest_s), self.tuning.committed_s)
-        return committed + self._rtt_hi_s + self._lateness_s + self.tuning.link_margin_s
+        return committed + self._queue_rtt_s(now_s) + self._lateness_s + self.tuning.link_margin_s
+
+    def _queue_rtt_s(self, now_s: float) -> float:
+        """The link's share of the queue: the time a new line may need to reach the planner,
+        beyond how far ahead of the machine the estimate runs.
+
+        With the estimate placed by its reports' round trips (see linksplit), that is the
+        line's own wire time, the controller's parse and the jitter of the way out; it never
+        exceeds the slow end of the round trips, which is all there is before a cruise has
+        shown its split, and all there is while a stall is remembered.
+        """
+        spread_s = self._split.spread_s()
+        floors_s = self._split.fastest_s()
+        if spread_s is None or floors_s is None or self._stall_sized:
+            return self._rtt_hi_s
+        line_s = self._line_bytes * self._byte_s
+        ok_s = len("ok\r\n") * self._byte_s
+        # The fastest jog round trip less the wire times of the line and its ok is the
+        # controller's parse and plan plus both ways' floors; the fastest report round trip
+        # less its wire time is those floors alone (a `?` is read at once, a line only once
+        # the ones before it are parsed: lines waiting in the RX buffer show up here).
+        ranked = self._rtts.ranked
+        fastest_s = ranked[0] if ranked else self._rtt_s
+        parse_s = max(fastest_s - line_s - ok_s - floors_s, 0.0)
+        # A `?` that came while a line was parsed is answered after it (the parse holds the
+        # main loop), so the spread holds the parse already when it is the larger.
+        backlog_s = max(self._wire_free_s - now_s, 0.0)
+        return min(self._rtt_hi_s, backlog_s + line_s + max(parse_s, spread_s))
 
     def _block_s(self, move: inc.VectorMove) -> float:
         """Duration of one increment at this speed: just over one 10 ms segment when possible.
@@ -1088,8 +1126,10 @@ class Jogger:
         n_blocks = self.limits.planner_blocks
         usable_blocks = max(n_blocks - self.tuning.planner_reserve_blocks, 1)
         block_s = self._block_s(move)
-        ahead_s = self._ahead_s(block_s)
-        committed_s = ahead_s - self._rtt_hi_s - self._lateness_s - self.tuning.link_margin_s
+        ahead_s = self._ahead_s(block_s, now_s)
+        committed_s = (
+            ahead_s - self._queue_rtt_s(now_s) - self._lateness_s - self.tuning.link_margin_s
+        )
         blocks = self._track.blocks_in_planner()
         for _ in range(n_blocks):
             queued_mm = self._track.queued_mm()
@@ -1986,7 +2026,8 @@ class Jogger:
             # The longest of the memory counts only when it stands out from the window (a
             # stall), so one slow reply does not lengthen the queue for half a minute.
             peak_s = peaks[0][1] if peaks else 0.0
-            self._rtt_hi_s = peak_s if peak_s > 2.0 * window_s + STALL_MIN_S else window_s
+            self._stall_sized = peak_s > 2.0 * window_s + STALL_MIN_S
+            self._rtt_hi_s = peak_s if self._stall_sized else window_s
             self._track.ack(pending.seg, now_s)
             return
         # A rejected G91 jog leaves the parser where it was, so every later increment is off:
@@ -2046,6 +2087,10 @@ class Jogger:
             self._track.update_estimate(now_s)
             predicted_mm = self._track.x_est_mm
             off_path = self._track.correct_estimate(mpos, (len(report.raw) + 2) * self._byte_s)
+            if not off_path:
+                self._split_by(report, asked_s, now_s)
+            else:
+                self._split.reset()
             lead_mm = self._track.x_est_mm - predicted_mm
             how = None if off_path else self._lags_outside(report, predicted_mm, asked_s, now_s)
             if how is None and unread is not None:
@@ -2140,6 +2185,39 @@ class Jogger:
                 self._fresh_status_wanted = False
                 self._finish_stop(now_s, cancelled=False, recancels=0)
         return lead_mm
+
+    def _split_by(self, report: StatusReport, asked_s: float | None, now_s: float) -> None:
+        """Feed a report of a cruise to the link split; once it is ready, age the estimate by
+        the split rather than by the report's wire time alone.
+
+        A cruise here is a Jog report at the commanded feed, on a block of that speed, with the
+        estimate cruising too: then the machine ran at that speed since the report before.
+        """
+        move = self._commanded
+        track = self._track
+        x_mm = track.x_reported_mm
+        here = track.seg_at(x_mm) if x_mm is not None else None
+        feed = report.feed
+        if (
+            x_mm is None
+            or here is None
+            or asked_s is None
+            or report.state != "Jog"
+            or self.phase is not Phase.JOGGING
+            or feed is None
+            or abs(feed - mm_s_to_mm_min(move.speed_mm_s)) > FEED_PRINT_MM_MIN
+            or here.speed_mm_s != move.speed_mm_s
+            or track.v_est_mm_s != move.speed_mm_s
+        ):
+            self._split.reset()
+            return
+        wire_s = (len(report.raw) + 2) * self._byte_s
+        self._split.add(
+            move, asked_s + self._status_backlog_s, now_s, x_mm, move.speed_mm_s, wire_s
+        )
+        age_s = self._split.newest_age_s()
+        if age_s is not None and age_s > wire_s:
+            track.x_est_mm = min(x_mm + track.v_est_mm_s * age_s, track.length_mm())
 
     def _lags_outside(
         self, report: StatusReport, predicted_mm: float, asked_s: float | None, now_s: float
@@ -2685,6 +2763,9 @@ class Jogger:
             out.append(SendRealtime(STATUS_QUERY))
             self._status_asked_s = now_s
             self._last_status_sent_s = now_s
+            # A `?` written behind the engine's own lines waits for them on the wire.
+            self._status_backlog_s = max(self._wire_free_s - now_s, 0.0)
+            self._wire_free_s = max(self._wire_free_s, now_s) + self._byte_s
 
     # ----------------------------------------------------------------- lines in flight
     # The engine's lines go into the host's ledger, which counts every owner's bytes against
@@ -2695,6 +2776,7 @@ class Jogger:
         """Send a line and remember it until its ok/error."""
         in_flight_bytes = self.ledger.in_flight_bytes + line_cost_bytes(line)
         tag = _LineTag(kind, seg, now_s + in_flight_bytes * self._byte_s)
+        self._wire_free_s = max(self._wire_free_s, now_s) + line_cost_bytes(line) * self._byte_s
         self._pending.append(self.ledger.record_line(ENGINE, line, now_s, tag))
         self.stats.lines_sent += 1
         if kind == "jog":
