@@ -40,7 +40,7 @@ MAX_GAP_S = 0.5
 class LinkSplit:
     """The reports of the current cruise and what they tell of the way out."""
 
-    __slots__ = ("_key", "_last_along_mm", "_last_s", "_samples")
+    __slots__ = ("_d_max", "_d_min", "_fastest", "_key", "_last_along_mm", "_last_s", "_samples")
 
     def __init__(self) -> None:
         self._key: object = None
@@ -49,6 +49,8 @@ class LinkSplit:
         self._samples: deque[tuple[float, float, float]] = deque(maxlen=WINDOW)
         self._last_along_mm = 0.0
         self._last_s = 0.0
+        # The window's extremes, worked out once per report: the engine asks at every poll.
+        self._d_min = self._d_max = self._fastest = 0.0
 
     def reset(self) -> None:
         """Forget the cruise (it ended, or a report broke it)."""
@@ -79,7 +81,12 @@ class LinkSplit:
         self._last_along_mm = along_mm
         self._last_s = now_s
         rtt_s = now_s - asked_s
-        self._samples.append((along_mm / speed_mm_s - asked_s, rtt_s, rtt_s - wire_s))
+        samples = self._samples
+        samples.append((along_mm / speed_mm_s - asked_s, rtt_s, rtt_s - wire_s))
+        ds = [d for d, _, _ in samples]
+        self._d_min = min(ds)
+        self._d_max = max(ds)
+        self._fastest = min(net for _, _, net in samples)
 
     @property
     def ready(self) -> bool:
@@ -90,21 +97,19 @@ class LinkSplit:
         """How much the way out varied over the window (None until ready)."""
         if not self.ready:
             return None
-        ds = [d for d, _, _ in self._samples]
-        return max(ds) - min(ds)
+        return self._d_max - self._d_min
 
     def fastest_s(self) -> float | None:
         """The fastest round trip of a report less its wire time: both ways' floors (None
         until ready)."""
         if not self.ready:
             return None
-        return min(net for _, _, net in self._samples)
+        return self._fastest
 
     def newest_age_s(self) -> float | None:
         """The largest age the newest report can have: its round trip less the part of its way
         out that was slower than the fastest seen (None until ready)."""
         if not self.ready:
             return None
-        d_min = min(d for d, _, _ in self._samples)
         d_new, rtt_new, _ = self._samples[-1]
-        return max(rtt_new - (d_new - d_min), 0.0)
+        return max(rtt_new - (d_new - self._d_min), 0.0)
