@@ -1029,7 +1029,8 @@ class Jogger:
         self._prev_jog_report = None
 
     def _ahead_s(self, block_s: float, now_s: float) -> float:
-        """Queue time beyond the stopping distance: committed segments, round trip, one tick.
+        """Queue time beyond the stopping distance: committed segments, the time a line needs
+        to reach the planner (_queue_rtt_s), how late the host wakes, the configured margin.
 
         The firmware commits segments of the blocks already queued, so the longest of those
         (or of the next one) decides how much time five segments can hold.
