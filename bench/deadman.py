@@ -36,7 +36,9 @@ def main(argv: list[str]) -> int:
     failed = 0
     for n in range(1, args.rounds + 1):
         ARTIFACT.unlink(missing_ok=True)
-        env = dict(os.environ, SMOOTHJOG_DEADMAN_HOLD_S=str(hold_s))
+        env = dict(
+            os.environ, SMOOTHJOG_DEADMAN_HOLD_S=str(hold_s), SMOOTHJOG_DEADMAN_STALL_MS="250"
+        )
         print(
             f"round {n}/{args.rounds}: holding a jog {hold_s:.0f} s under two CPU hogs ...",
             file=sys.stderr,

@@ -2,11 +2,11 @@
 
 Real headless Chromium, the real page and server, the recording backend; the browser's machine
 runs two processes that spin on a core each for the whole hold, and the page's own thread is
-made to stall 250 ms every 2 s, as it was seen to on a busy phone (stalls of 154 and 268 ms
-stopped held jogs when the heartbeat came from that thread). The link worker counts the page's
-stalls longer than the server's 150 ms window; its heartbeat must hold the jog through all of
-them. The hold lasts SMOOTHJOG_DEADMAN_HOLD_S seconds (45 by default; `python -m bench deadman`
-holds 5 minutes).
+made to stall STALL_MS every 2 s (200 ms here; 250 ms in the bench, as it was seen to stall
+on a busy phone, where stalls of 154 and 268 ms stopped held jogs when the heartbeat came from
+that thread). The link worker counts the page's stalls longer than the server's 150 ms window;
+its heartbeat must hold the jog through all of them. The hold lasts SMOOTHJOG_DEADMAN_HOLD_S
+seconds (45 by default; `python -m bench deadman` holds 5 minutes).
 """
 
 from __future__ import annotations
@@ -25,8 +25,12 @@ from tests.web.conftest import OpenPage, StartPendant
 from tests.web.test_page import start
 
 HOLD_S = float(os.environ.get("SMOOTHJOG_DEADMAN_HOLD_S", "45"))
-#: The page's own thread is kept busy this long, this often (below the page gate of 350 ms).
-STALL_MS = 250
+#: The page's own thread is kept busy this long, this often. Above the server's 150 ms window
+#: (what the test proves survives) and below the worker's 350 ms page gate. In the suite 200 ms:
+#: with both cores hogged and the rest of the suite running, a 250 ms busy loop was once seen
+#: as more than 350 ms of silence (the gate stopped the jog, as it must for a frozen page), and
+#: alone it measured 276-286 ms. `python -m bench deadman` keeps the 250 ms of a busy phone.
+STALL_MS = int(os.environ.get("SMOOTHJOG_DEADMAN_STALL_MS", "200"))
 STALL_EVERY_MS = 2000
 STALLS = f"""() => {{
   window.__stalls = setInterval(() => {{
@@ -69,7 +73,10 @@ async def test_a_held_jog_under_cpu_load_has_no_false_trips(
 
     trips = [r.getMessage() for r in caplog.records if r.getMessage().startswith("dead-man")]
     assert p.hub.deadman_trips == 0, trips
-    assert [c for c in backend.named("stop", t0) if c.t_s < released_s] == []
+    stops = [c for c in backend.named("stop", t0) if c.t_s < released_s]
+    # A stop with no server trip is the page's own (its worker's gate on a frozen page, which
+    # leaves its reason in the notice): say which.
+    assert stops == [], await page.locator("#notice").text_content()
     beats = [c.t_s for c in backend.named("jog_continuous", held_s) if c.t_s < released_s]
     # Reported, not asserted: the server runs on the loaded machine too, and a stall of its own
     # shows here as a gap (the arbiter waits for the heartbeats it held back before it stops).
