@@ -92,6 +92,14 @@ class _Host:
         """A reset: the reference methods send nothing of their own."""
         return []
 
+    def restart_outputs(self, now_s: float) -> list[Output]:
+        """A reset: the reference methods watch for nothing before the settings are read."""
+        return []
+
+    def restart_settled(self) -> bool:
+        """A reset: the reference methods read the settings again at once."""
+        return True
+
     def reset_machine(self, limits: EngineLimits) -> None:
         """A reset: the reference methods simply carry on with the new limits."""
         self.limits = limits

@@ -69,6 +69,10 @@ logger = logging.getLogger(__name__)
 #: someone resumed it.
 RESUME_POLL_S = 0.25
 
+#: Longest the re-handshake waits for the engine to see a restarted controller at rest (it
+#: then reads the settings anyway, and the engine's owed cancel follows them as before).
+RESTART_SETTLE_S = 2.0
+
 #: States in which a controller with nothing queued is at rest as far as jogging goes.
 REST_STATES = frozenset({"Idle", "Alarm", "Door", "Hold"})
 
@@ -96,6 +100,12 @@ class JogEngine(Protocol):
 
     def reset_outputs(self) -> list[Output]:
         """What to send the moment a banner arrives, before the re-handshake's first line."""
+
+    def restart_outputs(self, now_s: float) -> list[Output]:
+        """Realtime bytes to send while a restarted controller's settings wait to be read."""
+
+    def restart_settled(self) -> bool:
+        """True once nothing sent before a reset can still start the machine."""
 
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset)."""
@@ -211,6 +221,8 @@ class Host:
         self._write_lock: asyncio.Lock | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._rehandshake_task: asyncio.Task[None] | None = None
+        #: Set at every received line while the re-handshake waits on the engine (_settle_restart).
+        self._line_heard: asyncio.Event | None = None
         self._port: _QueryPort | None = None
         self._listeners: list[LineListener] = []
         self._routed_listeners: list[RoutedListener] = []
@@ -648,6 +660,8 @@ class Host:
                 port.queue.put_nowait(raw)  # not another owner's query output
             if isinstance(resp, Banner) and driver is not None and port is None:
                 self._start_rehandshake()
+        if self._line_heard is not None:
+            self._line_heard.set()
         # Copied (a listener may remove itself) only when there is anyone to call.
         if self._routed_listeners and not orphan:
             for routed in list(self._routed_listeners):
@@ -671,6 +685,7 @@ class Host:
         async def run() -> None:
             told = False
             try:
+                await self._settle_restart()
                 while True:
                     try:
                         await self._handshake()
@@ -704,6 +719,34 @@ class Host:
         self._rehandshake_task = asyncio.get_running_loop().create_task(
             run(), name="smoothjog-rehandshake"
         )
+
+    async def _settle_restart(self) -> None:
+        """Before the settings are read again: let the engine watch the restarted controller
+        until no jog line sent before the reset can still start it (Jogger.restart_settled),
+        writing only the realtime bytes it asks for (`?`, 0x85). Bounded by RESTART_SETTLE_S."""
+        engine = self._engine()
+        deadline_s = self.now_s() + RESTART_SETTLE_S
+        heard = asyncio.Event()
+        self._line_heard = heard
+        try:
+            while not engine.restart_settled():
+                if self.link_error is not None:
+                    raise self.link_error
+                now_s = self.now_s()
+                if now_s >= deadline_s:
+                    logger.info("the restarted controller was not seen at rest; reading it anyway")
+                    return
+                for output in engine.restart_outputs(now_s):
+                    if isinstance(output, SendRealtime):
+                        self.send_realtime(ENGINE, output.byte)
+                heard.clear()
+                wake_s = min(engine.next_deadline_s(now_s), deadline_s)
+                # A received line (a report that shows a jog running) or the engine's deadline.
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout_at(wake_s):  # the loop's clock is now_s's
+                        await heard.wait()
+        finally:
+            self._line_heard = None
 
     async def _until_resumed(self) -> None:
         """Ask `?` until the controller reports a state other than Hold, Door or Sleep."""

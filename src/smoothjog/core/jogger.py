@@ -583,6 +583,14 @@ class Jogger:
         self._cancel_ending = False
         #: A banner came with jog lines unanswered: one 0x85 goes out at once (reset_outputs).
         self._reset_cancel = False
+        #: When that banner came; until reset_machine, the host reads no settings while
+        #: restart_settled() is False, and the engine watches those lines (restart_outputs).
+        self._restart_s: float | None = None
+        #: The jog lines unanswered at that banner, the ledger's count of replies to nobody's
+        #: line then, and when the last such reply came (restart_outputs).
+        self._restart_jogs = 0
+        self._restart_unowned = 0
+        self._restart_reply_s = -math.inf
         self._idle_since_s: float | None = None  # the first of the Idle reports in a row
         #: When the `?` of each Idle report in a row was written (None: not known).
         self._idle_asked_s: list[float | None] = []
@@ -743,8 +751,14 @@ class Jogger:
         return self._track.end_mm
 
     def busy(self) -> bool:
-        """True while anything is queued, streaming or stopping, or an intent is held."""
-        return self.phase is not Phase.IDLE or bool(self._steps) or self._intent is not None
+        """True while anything is queued, streaming or stopping, or an intent is held, or lines
+        sent before a reset may still start the restarted controller (restart_settled)."""
+        return (
+            self.phase is not Phase.IDLE
+            or bool(self._steps)
+            or self._intent is not None
+            or not self.restart_settled()
+        )
 
     def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
         """Per-axis speed ratios in (0, 1]."""
@@ -835,6 +849,19 @@ class Jogger:
             self._reset_cancel = jogs > 0
             self._abandon_motion()
             self._forget_pending()
+            if jogs:
+                self._restart_s = now_s
+                self._restart_jogs = jogs
+                self._restart_unowned = self.ledger.stats.unowned_replies
+                self._restart_reply_s = now_s
+                # Reports from before the restart say nothing of what runs now, and the first
+                # Jog report after it may show a jog braking under reset_outputs' 0x85 rather
+                # than one just started: only a speed that rises counts as running then.
+                self._jog_unbraked = False
+                self._prev_feed_mm_min = math.inf
+                self._idle_since_s = None
+                self._idle_asked_s.clear()
+                self._status_asked_s = None  # a reset drops a `?` still pending
         elif isinstance(resp, Message) and resp.text == "Check Door":
             self._fault_now(now_s, "the safety door opened", "close the door and resume (~)")
             # The door already cancels the jog; send nothing more (lines in the controller's
@@ -858,6 +885,67 @@ class Jogger:
         self.stats.cancels += 1
         return [SendRealtime(JOG_CANCEL)]
 
+    def restart_outputs(self, now_s: float) -> list[Output]:
+        """What to send while the host waits to re-read a restarted controller's settings:
+        realtime bytes only. A `?` every OWED_POLL_S, and 0x85 for each jog a report shows
+        running: the jog lines that were on the wire when it restarted start it one after
+        another (those behind a cancel wait for its end, firmware-facts §3.1). No line goes
+        out: the settings are read next, and a sync's reply must not mix with theirs.
+
+        Before, nothing cancelled such a jog until the settings had been read: a press made
+        just after someone else's reset of a machine at rest ran 5.7 mm of its first lines.
+        """
+        out: list[Output] = []
+        if self._restart_s is None:
+            return out
+        # Their replies go to nobody's line (the ledger forgot them at the banner). While some
+        # may still come, more of them may follow the jog that runs within milliseconds: one
+        # 0x85 after the last throws them all away together, where one sent at once would hold
+        # the rest back to start one by one after it, 1.25 mm each on the hobby router (as
+        # during a stop, see _advance_stop). Those the reset threw away never answer: after a
+        # quiet spell of a poll and the round trips' spread, the jog is cancelled anyway. Where
+        # 0x85 empties the RX buffer (grblHAL) there is nothing to wait for.
+        unowned = self.ledger.stats.unowned_replies
+        if unowned != self._restart_unowned:
+            self._restart_jogs -= unowned - self._restart_unowned
+            self._restart_unowned = unowned
+            self._restart_reply_s = now_s
+        quiet_s = OWED_POLL_S + max(self._rtt_hi_s - self._rtt_s, 0.0)
+        if (
+            self._jog_unbraked
+            and self.model.state == "Jog"
+            and (
+                self._restart_jogs <= 0
+                or now_s - self._restart_reply_s >= quiet_s
+                or firmware_facts(self.limits.firmware).jog_cancel.flushes_rx
+            )
+        ):
+            self._send_owed_cancel(out)
+        self._poll_status(now_s, out)
+        return out
+
+    def restart_settled(self) -> bool:
+        """True once no line sent before a restart can still start the machine.
+
+        That is when the restarted controller has answered Idle to two `?`s in a row, both
+        written after its banner, the second after the first report came back. Each `?` went
+        behind every line sent before it (the link keeps the order of bytes), and Grbl
+        parses a jog line within milliseconds once no cancel holds its main loop, so a line
+        still to start would show as Jog by the second (firmware-facts §3.7). Also true in a
+        state that starts no jog (Alarm; Hold, Door and Sleep, which the re-handshake waits
+        out, the cancel staying owed) and when no jog line was unanswered at the banner.
+        """
+        since_s = self._restart_s
+        if since_s is None:
+            return True
+        state = self.model.state
+        if state is not None and state not in JOG_STATES:
+            return True
+        after = sum(
+            1 for asked_s in self._idle_asked_s if asked_s is not None and asked_s >= since_s
+        )
+        return after >= 2 + self._others_poll()
+
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset).
 
@@ -868,6 +956,7 @@ class Jogger:
         """
         owed = self._cancel_owed
         intent, steps = self._intent, list(self._steps)
+        self._restart_s = None
         self.limits = limits
         self._forget_pending()
         self._abandon_motion()
@@ -2737,6 +2826,12 @@ class Jogger:
         )
 
     def _poll_interval_s(self) -> float:
+        if self._restart_s is not None:
+            # Watching a restarted controller (restart_outputs): no line of the engine's is out
+            # and none will be until the settings are read, so no reply needs the return wire's
+            # room; one `?` at a time keeps reports from piling up. At 9600 baud the usual share
+            # spaced them 150 ms apart, and a line that ran after the reset's cancel went 13 mm.
+            return OWED_POLL_S
         busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
         interval_s = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s
         if self._cancel_owed or (

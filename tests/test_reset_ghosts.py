@@ -1,0 +1,93 @@
+"""Someone else resets a machine at rest just as a press's first jog lines go out.
+
+The lines reach the restarted controller and start it as fresh jogs (firmware-facts §3.4). The
+host reads the settings again only once the engine has cancelled what they started and seen
+the machine at rest: before, nothing cancelled them until the settings had been read, and the
+whole first burst ran (5.7 mm on the hobby router over the ideal wire).
+"""
+
+from __future__ import annotations
+
+import pytest
+from bench import measure
+
+from smoothjog.core.intents import ContinuousIntent, StopIntent
+from smoothjog.core.realtime import RESET
+from smoothjog.sim.firmware import GrblFirmware
+from smoothjog.sim.profiles import get_firmware_profile
+from smoothjog.sim.rig import LinkModel, SimRig
+from smoothjog.virtual import VirtualHost
+
+HELD = ContinuousIntent({"X": -1.0}, 1.0)
+#: Two runs of the prepared segments from rest (1.25 mm each on the hobby router) at most:
+#: one cancelled as it starts, one for lines the cancel held back in the RX buffer.
+GHOST_LIMIT_MM = 3.0
+
+
+def _reset_then_press(firmware: str) -> tuple[VirtualHost, float, list[tuple[float, bytes]]]:
+    fw = GrblFirmware(get_firmware_profile(firmware), "hobby-router")
+    vs = VirtualHost(SimRig(fw, LinkModel()))
+    vs.handshake()
+    vs.run_until(vs.now_s + 0.05)
+    written: list[tuple[float, bytes]] = []
+    original = vs.rig.host_send
+
+    def spy(data: bytes, now_s: float) -> float:
+        written.append((now_s, data))
+        return original(data, now_s)
+
+    vs.rig.host_send = spy  # type: ignore[method-assign]
+    t_reset = vs.now_s
+
+    async def another_sender_resets() -> None:
+        vs.link.send_realtime(RESET)
+
+    vs.loop.run_until_complete(another_sender_resets())
+    vs.set_intent(HELD)  # pressed before the banner can come back
+    vs.run_until(t_reset + 0.3)
+    vs.set_intent(StopIntent())
+    vs.run_until(t_reset + 1.5)
+    return vs, t_reset, written
+
+
+@pytest.mark.parametrize("firmware", ["grbl", "grblhal"])
+def test_lines_that_start_a_reset_controller_are_cancelled_before_its_settings_are_read(
+    firmware: str,
+) -> None:
+    vs, t_reset, written = _reset_then_press(firmware)
+    trace = vs.rig.trace
+    moved_mm = measure.distance_after(trace, t_reset)
+    assert 0.0 < moved_mm <= GHOST_LIMIT_MM
+    settings_read_s = next(t for t, data in written if data == b"$I\n")
+    assert settings_read_s > measure.last_motion_end(trace)
+    assert not vs.host.rehandshaking
+    assert any("the controller was reset" in e.text for e in vs.events)
+    # The host jogs again on a new press.
+    before = vs.model.mpos_mm
+    vs.set_intent(HELD)
+    vs.run_until(vs.now_s + 0.3)
+    vs.set_intent(StopIntent())
+    assert vs.run_until_idle(5.0)
+    assert before is not None
+    assert vs.model.mpos_mm is not None
+    assert vs.model.mpos_mm[0] < before[0] - 5.0
+    vs.close()
+
+
+def test_a_restarted_controller_never_seen_at_rest_is_read_again_after_the_time_limit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The wait before the settings are read is bounded: a controller whose reports never show
+    rest (here: an engine that never says so) is read again after RESTART_SETTLE_S."""
+    from smoothjog import host as host_module
+    from smoothjog.core.jogger import Jogger
+
+    monkeypatch.setattr(Jogger, "restart_settled", lambda self: False)
+    vs, t_reset, written = _reset_then_press("grbl")
+    vs.run_until(t_reset + host_module.RESTART_SETTLE_S + 1.0)
+    settings_read_s = next(t for t, data in written if data == b"$I\n")
+    # From the banner (some 30 ms after the reset), the limit, then the handshake's first line.
+    waited_s = settings_read_s - t_reset
+    assert host_module.RESTART_SETTLE_S < waited_s < host_module.RESTART_SETTLE_S + 0.5
+    assert not vs.host.rehandshaking
+    vs.close()
