@@ -1,4 +1,4 @@
-"""`python -m bench NAME [options]`: jog fuzz micro sim cpu cncjs proxy deadman stopat."""
+"""`python -m bench NAME [options]`: run one benchmark (see README.md, "Other commands")."""
 
 from __future__ import annotations
 
@@ -46,6 +46,14 @@ def main() -> int:
         from bench import deadman
 
         return deadman.main(rest)
+    if name == "lead":
+        from bench import lead
+
+        return lead.main(rest)
+    if name == "reset":
+        from bench import reset
+
+        return reset.main(rest)
     if name == "all":
         from bench import bench_sim_speed, jog, micro
 
@@ -54,8 +62,8 @@ def main() -> int:
         code |= bench_sim_speed.main()
         return code
     print(
-        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, proxy, deadman"
-        " or stopat",
+        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, proxy, deadman,"
+        " stopat, lead or reset",
         file=sys.stderr,
     )
     return 2
