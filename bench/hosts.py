@@ -100,6 +100,9 @@ class _Host:
         """A reset: the reference methods read the settings again at once."""
         return True
 
+    def restart_wire_clear(self, now_s: float) -> None:
+        """A reset: the reference methods count nothing from the wire."""
+
     def reset_machine(self, limits: EngineLimits) -> None:
         """A reset: the reference methods simply carry on with the new limits."""
         self.limits = limits

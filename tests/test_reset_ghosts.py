@@ -91,3 +91,53 @@ def test_a_restarted_controller_never_seen_at_rest_is_read_again_after_the_time_
     assert host_module.RESTART_SETTLE_S < waited_s < host_module.RESTART_SETTLE_S + 0.5
     assert not vs.host.rehandshaking
     vs.close()
+
+
+def test_lines_the_link_still_held_at_the_banner_delay_the_count(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A `?` overtakes lines still queued in the link (a stalled wire): Idle reports asked
+    before those lines left count for nothing."""
+    from smoothjog.host import Host
+
+    clear_s: list[float] = []
+
+    def held(self: Host) -> bool:
+        if not clear_s:
+            clear_s.append(self.now_s() + 1.0)  # the first look, at the banner
+        return self.now_s() < clear_s[0]
+
+    monkeypatch.setattr(Host, "_lines_held", held)
+    vs, _t_reset, written = _reset_then_press("grbl")
+    vs.run_until(vs.now_s + 1.0)
+    settings_read_s = next(t for t, data in written if data == b"$I\n")
+    # Two reports asked once the lines were out, then the settings.
+    asked_after = [t for t, data in written if data == b"?" and clear_s[0] <= t < settings_read_s]
+    assert len(asked_after) >= 2
+    assert not vs.host.rehandshaking
+    vs.close()
+
+
+def test_machine_commands_wait_in_words_while_a_restarted_controller_is_read() -> None:
+    from smoothjog.control import MachineControl
+
+    fw = GrblFirmware(get_firmware_profile("grbl"), "hobby-router")
+    vs = VirtualHost(SimRig(fw, LinkModel()))
+    vs.handshake()
+    control = MachineControl(vs.host)
+
+    async def another_sender_resets() -> None:
+        vs.link.send_realtime(RESET)
+
+    vs.loop.run_until_complete(another_sender_resets())
+    vs.set_intent(HELD)
+    while not vs.host.rehandshaking:
+        vs.run_until(vs.now_s + 0.001)
+    assert control.refusal(locked_ok=True) == (
+        "the controller restarted: wait while smoothjog reads its settings again"
+    )
+    vs.set_intent(StopIntent())
+    vs.run_until(vs.now_s + 2.0)
+    assert not vs.host.rehandshaking
+    assert control.refusal() is None
+    vs.close()

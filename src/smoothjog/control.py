@@ -95,6 +95,8 @@ class MachineControl:
         state = host.model.state
         if host.model.jog_lock is not None and not locked_ok:
             return host.model.jog_lock
+        if host.rehandshaking:
+            return "the controller restarted: wait while smoothjog reads its settings again"
         if host.busy() or state in MOVING_STATES:
             return "the machine is moving: press STOP and wait until it stands still"
         return None

@@ -107,6 +107,9 @@ class JogEngine(Protocol):
     def restart_settled(self) -> bool:
         """True once nothing sent before a reset can still start the machine."""
 
+    def restart_wire_clear(self, now_s: float) -> None:
+        """Every line written before the reset has now left the host."""
+
     def reset_machine(self, limits: EngineLimits) -> None:
         """Start over after a re-handshake (the controller was reset)."""
 
@@ -728,14 +731,20 @@ class Host:
         deadline_s = self.now_s() + RESTART_SETTLE_S
         heard = asyncio.Event()
         self._line_heard = heard
+        # Lines the link still holds (a stalled wire) or the deferred writer still writes left
+        # before the banner's `?`s, which overtake them: the count starts once they are out.
+        queued = self._lines_held()
         try:
-            while not engine.restart_settled():
+            while not engine.restart_settled() or queued:
                 if self.link_error is not None:
                     raise self.link_error
                 now_s = self.now_s()
                 if now_s >= deadline_s:
                     logger.info("the restarted controller was not seen at rest; reading it anyway")
                     return
+                if queued and not self._lines_held():
+                    queued = False
+                    engine.restart_wire_clear(now_s)
                 for output in engine.restart_outputs(now_s):
                     if isinstance(output, SendRealtime):
                         self.send_realtime(ENGINE, output.byte)
@@ -746,7 +755,12 @@ class Host:
                     async with asyncio.timeout_at(wake_s):  # the loop's clock is now_s's
                         await heard.wait()
         finally:
-            self._line_heard = None
+            if self._line_heard is heard:  # a second banner's watch may have its own by now
+                self._line_heard = None
+
+    def _lines_held(self) -> bool:
+        """True while lines written before now are not yet handed to the wire."""
+        return self.link.queued_bytes > 0 or self._deferred
 
     async def _until_resumed(self) -> None:
         """Ask `?` until the controller reports a state other than Hold, Door or Sleep."""

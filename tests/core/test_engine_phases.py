@@ -661,7 +661,8 @@ RESET_ROWS = [
             phase_is(Phase.IDLE),
             check(lambda h: "jog lines had no reply yet" in h.fault_texts()[0], "says so"),
             check(lambda h: h.engine.can_jog()[0] is False, "no jog before a report"),
-            sends(),
+            # The reset dropped the `?` still pending: one goes out at once.
+            sends("?"),
             report("Idle"),
             intent(StepIntent("X", -1.0)),
             # Jog lines still on the wire at the reset may start the restarted controller:
@@ -1263,7 +1264,7 @@ def test_the_cancel_owed_at_a_reset_survives_the_re_handshake() -> None:
     h.ledger.reset()
     h.engine.reset_machine(dataclasses.replace(h.engine.limits))
     h.status("Jog", (-1.5, -1.0, -1.0))
-    assert kinds(h.poll()) == ["0x85", "G4P0"]
+    assert kinds(h.poll()) == ["0x85", "G4P0", "?"]  # the reset dropped the pending `?`
 
 
 def test_a_press_made_while_the_settings_are_re_read_after_a_reset_jogs() -> None:
@@ -1278,8 +1279,9 @@ def test_a_press_made_while_the_settings_are_re_read_after_a_reset_jogs() -> Non
     h.intent(ContinuousIntent({"X": -1.0}, 0.2))  # pressed during the re-handshake
     h.engine.reset_machine(dataclasses.replace(h.engine.limits))
     h.status("Idle", START_MPOS)
-    # The jog lines sent before the reset may still start it: their cancel and sync come first.
-    assert kinds(h.poll()) == ["0x85", "G4P0"]
+    # The jog lines sent before the reset may still start it: their cancel and sync come first
+    # (and a `?` for the one the reset dropped).
+    assert kinds(h.poll()) == ["0x85", "G4P0", "?"]
     h.ok()
     h.status("Idle", START_MPOS)
     h.poll()

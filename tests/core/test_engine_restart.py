@@ -143,3 +143,53 @@ def test_reports_are_asked_often_while_watching_even_on_a_slow_wire() -> None:
     assert _watch(h, 0.0) == ["?"]
     h.status("Idle", START_MPOS)
     assert _watch(h) == ["?"]
+
+
+def test_a_second_reset_during_the_watch_starts_it_again_and_keeps_the_cancel_owed() -> None:
+    h, _jogs = _reset_with_jogs_on_the_wire()
+    assert _watch(h, 0.0) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert _watch(h) == ["?"]  # this `?` dies with the second reset
+    h.feed(BANNER)
+    assert kinds(h.engine.reset_outputs()) == ["0x85"]  # the old lines may still start it
+    # The report from before it does not count, and the lost `?` is not waited for.
+    assert not h.engine.restart_settled()
+    assert _watch(h, 0.001) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert not h.engine.restart_settled()
+    assert _watch(h) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert h.engine.restart_settled()
+    h.engine.reset_machine(dataclasses.replace(h.engine.limits))
+    assert kinds(h.poll())[:2] == ["0x85", "G4P0"]
+
+
+def test_reports_asked_before_the_old_lines_left_the_host_do_not_count() -> None:
+    h, _jogs = _reset_with_jogs_on_the_wire()
+    assert _watch(h, 0.0) == ["?"]
+    h.status("Idle", START_MPOS)
+    h.engine.restart_wire_clear(h.advance(0.002))  # the link's queue held lines until now
+    assert _watch(h) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert not h.engine.restart_settled()
+    assert _watch(h) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert h.engine.restart_settled()
+
+
+def test_a_jog_waiting_on_old_replies_is_woken_when_they_go_quiet() -> None:
+    h, _jogs = _reset_with_jogs_on_the_wire()
+    assert _watch(h, 0.0) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert _watch(h) == ["?"]
+    h.advance(0.005)
+    h.feed("ok")  # one old line answered; the others may follow
+    h.status("Jog", RUNNING, fs=(1500, 0))
+    assert _watch(h, 0.0) == []
+    assert _watch(h, 0.006) == ["?"]  # no 0x85 yet: the last reply came 6 ms ago
+    # That `?`'s report may be slow (up to status_timeout_s): the engine's deadline is the end
+    # of the quiet spell, when the jog is cancelled.
+    quiet_s = OWED_POLL_S + h.engine._rtt_hi_s - h.engine._rtt_s
+    deadline_s = h.engine.next_deadline_s(h.t)
+    assert deadline_s <= h.engine._restart_reply_s + quiet_s + 1e-9
+    assert kinds(h.engine.restart_outputs(deadline_s)) == ["0x85"]

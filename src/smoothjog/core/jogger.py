@@ -586,9 +586,11 @@ class Jogger:
         #: When that banner came; until reset_machine, the host reads no settings while
         #: restart_settled() is False, and the engine watches those lines (restart_outputs).
         self._restart_s: float | None = None
-        #: The jog lines unanswered at that banner, the ledger's count of replies to nobody's
-        #: line then, and when the last such reply came (restart_outputs).
-        self._restart_jogs = 0
+        #: Replies still due to lines the ledger dropped at that banner (any owner's), the
+        #: ledger's counts of lines dropped at resets and of replies to nobody's line when last
+        #: looked at, and when the last such reply came (restart_outputs).
+        self._restart_replies_due = 0
+        self._restart_lost = self.ledger.stats.lost_to_reset
         self._restart_unowned = 0
         self._restart_reply_s = -math.inf
         self._idle_since_s: float | None = None  # the first of the Idle reports in a row
@@ -834,7 +836,7 @@ class Jogger:
             jogs = sum(1 for e in self._pending if _kind(e) == "jog")
             lost = (
                 f"; {jogs} jog line{'s' if jogs != 1 else ''} had no reply yet: any that reach"
-                " the restarted controller are cancelled as soon as it reports Jog"
+                " the restarted controller are cancelled once a report shows them running"
                 if jogs
                 else ""
             )
@@ -846,12 +848,21 @@ class Jogger:
             # Lines still on the wire when it restarted run as new jogs: owe them a cancel
             # (computed before the replies they will never get are forgotten), and send one at
             # once (reset_outputs).
-            self._reset_cancel = jogs > 0
+            watching = self._restart_s is not None
+            owed = self._cancel_owed
+            self._reset_cancel = jogs > 0 or watching
             self._abandon_motion()
             self._forget_pending()
-            if jogs:
+            lost_total = self.ledger.stats.lost_to_reset
+            dropped, self._restart_lost = lost_total - self._restart_lost, lost_total
+            if jogs or watching:
+                # Another reset while the lines of the last one may still be on their way:
+                # they can start this restarted controller as well (the cancel stays owed).
+                self._cancel_owed = self._cancel_owed or owed
                 self._restart_s = now_s
-                self._restart_jogs = jogs
+                # Each line the ledger dropped may still be answered, whoever wrote it: its
+                # reply then goes to nobody's line.
+                self._restart_replies_due = (self._restart_replies_due if watching else 0) + dropped
                 self._restart_unowned = self.ledger.stats.unowned_replies
                 self._restart_reply_s = now_s
                 # Reports from before the restart say nothing of what runs now, and the first
@@ -861,7 +872,9 @@ class Jogger:
                 self._prev_feed_mm_min = math.inf
                 self._idle_since_s = None
                 self._idle_asked_s.clear()
-                self._status_asked_s = None  # a reset drops a `?` still pending
+                # A reset drops a `?` still pending: ask again at once.
+                self._status_asked_s = None
+                self._last_status_sent_s = -math.inf
         elif isinstance(resp, Message) and resp.text == "Check Door":
             self._fault_now(now_s, "the safety door opened", "close the door and resume (~)")
             # The door already cancels the jog; send nothing more (lines in the controller's
@@ -887,10 +900,11 @@ class Jogger:
 
     def restart_outputs(self, now_s: float) -> list[Output]:
         """What to send while the host waits to re-read a restarted controller's settings:
-        realtime bytes only. A `?` every OWED_POLL_S, and 0x85 for each jog a report shows
-        running: the jog lines that were on the wire when it restarted start it one after
-        another (those behind a cancel wait for its end, firmware-facts §3.1). No line goes
-        out: the settings are read next, and a sync's reply must not mix with theirs.
+        realtime bytes only. One `?` at a time, at most every OWED_POLL_S, and 0x85 for each
+        jog a report shows running: the jog lines that were on the wire when it restarted
+        start it one after another (those behind a cancel wait for its end, firmware-facts
+        §3.1). No line goes out: the settings are read next, and a sync's reply must not mix
+        with theirs.
 
         Before, nothing cancelled such a jog until the settings had been read: a press made
         just after someone else's reset of a machine at rest ran 5.7 mm of its first lines.
@@ -907,16 +921,15 @@ class Jogger:
         # 0x85 empties the RX buffer (grblHAL) there is nothing to wait for.
         unowned = self.ledger.stats.unowned_replies
         if unowned != self._restart_unowned:
-            self._restart_jogs -= unowned - self._restart_unowned
+            self._restart_replies_due -= unowned - self._restart_unowned
             self._restart_unowned = unowned
             self._restart_reply_s = now_s
-        quiet_s = OWED_POLL_S + max(self._rtt_hi_s - self._rtt_s, 0.0)
         if (
             self._jog_unbraked
             and self.model.state == "Jog"
             and (
-                self._restart_jogs <= 0
-                or now_s - self._restart_reply_s >= quiet_s
+                self._restart_replies_due <= 0
+                or now_s - self._restart_reply_s >= self._restart_quiet_s()
                 or firmware_facts(self.limits.firmware).jog_cancel.flushes_rx
             )
         ):
@@ -924,12 +937,26 @@ class Jogger:
         self._poll_status(now_s, out)
         return out
 
+    def _restart_quiet_s(self) -> float:
+        """How long no reply of a line from before a reset must come before the rest count as
+        thrown away by it: a poll and the spread of the round trips (an FTDI adapter's timer
+        holds replies back in batches)."""
+        return OWED_POLL_S + max(self._rtt_hi_s - self._rtt_s, 0.0)
+
+    def restart_wire_clear(self, now_s: float) -> None:
+        """Every line written before the reset has left the host now: the link's own queue
+        still held some at the banner (a stalled wire), and a `?` overtakes such lines, so
+        only one asked from now on comes behind them all (restart_settled)."""
+        if self._restart_s is not None:
+            self._restart_s = max(self._restart_s, now_s)
+
     def restart_settled(self) -> bool:
         """True once no line sent before a restart can still start the machine.
 
         That is when the restarted controller has answered Idle to two `?`s in a row, both
-        written after its banner, the second after the first report came back. Each `?` went
-        behind every line sent before it (the link keeps the order of bytes), and Grbl
+        written after its banner (or after restart_wire_clear), the second after the first
+        report came back. Each `?` went behind every line sent before it (the wire keeps the
+        order of bytes), and Grbl
         parses a jog line within milliseconds once no cancel holds its main loop, so a line
         still to start would show as Jog by the second (firmware-facts §3.7). Also true in a
         state that starts no jog (Alarm; Hold, Door and Sleep, which the re-handshake waits
@@ -1058,6 +1085,9 @@ class Jogger:
             due_s = self._status_due_s()
         if self.phase is Phase.JOGGING and self._wake_at_s is not None:
             due_s = min(due_s, self._wake_at_s)
+        elif self._restart_s is not None and self._jog_unbraked and self._restart_replies_due > 0:
+            # A jog seen running waits for the old lines' replies: cancel it when they go quiet.
+            due_s = min(due_s, self._restart_reply_s + self._restart_quiet_s())
         elif self.phase in (Phase.SETTLING, Phase.STEPPING):
             due_s = min(due_s, now_s + self.tuning.settle_tick_s)
         return max(due_s, now_s + self.tuning.tick_s)
@@ -2827,10 +2857,11 @@ class Jogger:
 
     def _poll_interval_s(self) -> float:
         if self._restart_s is not None:
-            # Watching a restarted controller (restart_outputs): no line of the engine's is out
-            # and none will be until the settings are read, so no reply needs the return wire's
-            # room; one `?` at a time keeps reports from piling up. At 9600 baud the usual share
-            # spaced them 150 ms apart, and a line that ran after the reset's cancel went 13 mm.
+            # Watching a restarted controller (restart_outputs): the engine writes no line until
+            # the settings are read, so no reply of a new line needs the return wire's room (the
+            # old lines' replies are what it waits for); one `?` at a time keeps reports from
+            # piling up. At 9600 baud the usual share spaced them 150 ms apart, and a line that
+            # ran after the reset's cancel went 13 mm.
             return OWED_POLL_S
         busy = self.phase is not Phase.IDLE or self.model.state not in (None, "Idle")
         interval_s = self.tuning.poll_moving_s if busy else self.tuning.poll_idle_s

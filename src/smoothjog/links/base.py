@@ -333,6 +333,11 @@ class Link(ABC):
     def cork(self) -> None:  # noqa: B027 - optional: most links write at once
         """Hold what is sent from now on until uncork(), to write it in one go."""
 
+    @property
+    def queued_bytes(self) -> int:
+        """Bytes accepted by the link but not yet handed on to the wire (none by default)."""
+        return 0
+
     def uncork(self) -> None:  # noqa: B027 - optional, as cork()
         """Write what cork() held back (a no-op for links that never hold anything)."""
 

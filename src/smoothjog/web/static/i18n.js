@@ -383,9 +383,10 @@ const SERVER_ZH = [
   [/^selecting (\S+)$/, "选择 {1}"],
   [/^wait: (.+) has not finished$/, "请等待：{1} 尚未完成"],
   [/^the machine is moving: press STOP and wait until it stands still$/, "机器正在移动：请按停止并等它停稳"],
+  [/^the controller restarted: wait while smoothjog reads its settings again$/, "控制器已重启：请稍候，smoothjog 正在重新读取它的设置"],
   // The engine's faults (jogger.py _fault_now) and their fix hints.
   [/^the controller was reset \(its banner arrived mid-session\)$/, "控制器被复位了（会话中途收到了它的开机信息）"],
-  [/^the controller was reset \(its banner arrived mid-session\); (\d+) jog lines? had no reply yet: any that reach the restarted controller are cancelled as soon as it reports Jog$/, "控制器被复位了（会话中途收到了它的开机信息）；有 {1} 行点动指令尚未应答：其中到达重启后控制器的，一旦它报告 Jog 就会被取消"],
+  [/^the controller was reset \(its banner arrived mid-session\); (\d+) jog lines? had no reply yet: any that reach the restarted controller are cancelled once a report shows them running$/, "控制器被复位了（会话中途收到了它的开机信息）；有 {1} 行点动指令尚未应答：其中到达重启后控制器的，一旦状态报告显示它们在运行就会被取消"],
   [/^check why it reset; smoothjog re-reads its settings before jogging again$/, "请查明复位原因；再次点动前 smoothjog 会重新读取它的设置"],
   [/^the safety door opened$/, "安全门被打开"],
   [/^close the door and resume \(~\)$/, "请关上安全门并继续（~）"],
