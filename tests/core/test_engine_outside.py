@@ -14,7 +14,8 @@ import pytest
 
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
 from smoothjog.core.jogger import JogTuning, Phase
-from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
+from smoothjog.core.machine import KeepOut
+from tests.core.engine_harness import START_MPOS, EngineHarness, jog_target, kinds
 
 HELD = ContinuousIntent({"X": -1.0}, 1.0)
 FEED_MM_MIN = 5000.0
@@ -811,3 +812,37 @@ def test_the_start_of_a_fresh_jog_is_no_junction_at_rest() -> None:
         x0 += 1.736
     track.x_est_mm = 13.75
     assert not h.engine._near_a_junction_at_rest()
+
+
+def test_a_rest_inside_a_block_holds_back_lines_that_would_enter_a_zone_from_there() -> None:
+    """A hold 5 ms after a press, with a reversal behind it (fuzz, FluidNC over CH340): the
+    report at rest inside the first block is not yet explained, and the lines behind that
+    block may run from there. A slide along the vise sent on the engine's path, 1.5 mm off
+    the machine's, took it into the vise before."""
+    vise = KeepOut("vise", (-420.0, -420.0, -100.0), (-380.0, -380.0, 0.0))
+    start = (-376.963, -400.950, -65.308)
+    h = EngineHarness(keepouts=(vise,), limits={"firmware": "fluidnc"}, soft_limits=True)
+    h.rest_at(start)
+    h.intent(ContinuousIntent({"X": 0.7, "Y": 0.7}, 0.6))
+    h.poll()
+    h.advance(0.004)
+    parsed = len(h.jog_lines())  # parsed before the hold struck: gone with the planner
+    h.ok_all()
+    h.intent(ContinuousIntent({"X": -1.0, "Y": -1.0, "Z": 0.3}, 1.0))
+    h.advance(0.001)
+    h.poll()
+    h.advance(0.004)
+    h.ok_all()
+    rest = (-375.875, -399.863, -65.308)  # 1.1 mm into the first block, FS:0
+    h.status("Jog", rest, fs=(0, 0))
+    assert h.engine._rest_inside is not None
+    end = h.t + 0.12
+    while h.t < end:
+        h.advance(0.005)
+        h.ok_all()
+        h.poll()
+    # Every line behind the first ones, run one after another from the rest, stays clear.
+    lines = h.jog_lines()[parsed:]
+    for k in range(len(lines) + 1):
+        x, y, _z = jog_target(rest, lines[:k])
+        assert not (x < -380.0 and y < -380.0), (k, lines)

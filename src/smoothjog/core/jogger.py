@@ -1480,6 +1480,8 @@ class Jogger:
                     o + e - b for o, e, b in zip(offsets[-1], seg.end_mm, seg.start_mm, strict=True)
                 )
             )
+        if not self._suspect_rest_clear(deltas, zones):
+            return False
         # The path behind the machine (kept for late reports) is skipped by bisection: this
         # runs for every line sent near a zone.
         first = track.seg_index_at(x_mm) or 0
@@ -1500,6 +1502,46 @@ class Jogger:
                         continue
                     if inc.sweep_enters_box(a, b, deltas, lo, hi):
                         return False
+        return True
+
+    def _suspect_rest_clear(self, deltas: Vec, zones: Sequence[tuple[Vec, Vec]]) -> bool:
+        """False when a report at rest inside a block, not yet explained, may be someone
+        else's stop there and this line could then enter a zone.
+
+        Until _rested_inside_a_block settles it, such a rest (FS:0 inside an acknowledged
+        block) may be an outside hold or 0x85 that struck while the lines behind it were on
+        their way. Grbl and FluidNC parse lines in order: those parsed before the stop went
+        with the planner, those still in the RX buffer run one after another from the
+        stopping point (firmware-facts §3.1), acknowledged by now or not. So this line may
+        start at that point plus any unbroken run of the lines after the block. Before, a
+        hold 5 ms after a press, with a reversal behind it, let the engine slide along the
+        vise on a path 1.5 mm off the machine's, and the machine entered the vise (fuzz,
+        FluidNC over CH340).
+        """
+        suspect = self._rest_inside
+        if suspect is None or not zones:
+            return True
+        _built_s, rest_mm, seg = suspect
+        track = self._track
+        after: list[Vec] = []
+        found = False
+        for piece in track.path:
+            if found:
+                after.append(
+                    tuple(e - b for e, b in zip(piece.end_mm, piece.start_mm, strict=True))
+                )
+            elif piece is seg:
+                found = True
+        if not found:
+            return True  # the path was begun afresh: the suspicion is moot
+        rest = track.point_at(rest_mm)
+        for first in range(len(after) + 1):
+            point = rest
+            for k in range(first, len(after) + 1):
+                if k > first:
+                    point = tuple(p + d for p, d in zip(point, after[k - 1], strict=True))
+                if any(inc.sweep_enters_box(point, point, deltas, lo, hi) for lo, hi in zones):
+                    return False
         return True
 
     def _room_along(self, start: Vec, ray: Vec) -> tuple[float, str]:
