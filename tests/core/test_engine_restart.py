@@ -193,3 +193,17 @@ def test_a_jog_waiting_on_old_replies_is_woken_when_they_go_quiet() -> None:
     deadline_s = h.engine.next_deadline_s(h.t)
     assert deadline_s <= h.engine._restart_reply_s + quiet_s + 1e-9
     assert kinds(h.engine.restart_outputs(deadline_s)) == ["0x85"]
+
+
+def test_a_jog_at_rest_right_after_idle_is_ending_and_gets_no_cancel() -> None:
+    """A step of 0.01 mm sent as someone reset the controller starts it and ends at once: its
+    first report is Jog with FS:0. A 0x85 then would land in its last moments and leave Grbl
+    1.1h suspended, answering no line, so the settings could never be read again (fuzz)."""
+    h, jogs = _reset_with_jogs_on_the_wire()
+    for _ in range(jogs):
+        h.feed("ok")
+    assert _watch(h, 0.0) == ["?"]
+    h.status("Idle", START_MPOS)
+    assert _watch(h) == ["?"]
+    h.status("Jog", (-1.0, -1.0, -1.01), fs=(0, 0))
+    assert "0x85" not in _watch(h)

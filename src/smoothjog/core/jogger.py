@@ -2212,13 +2212,17 @@ class Jogger:
         # no lower than the last report's is a jog that is not being cancelled. Without an
         # FS field every Jog report counts.
         # A report of Jog right after one of another state is a jog just started, at any
-        # speed; at rest in Jog after a Jog report is a stop ending.
+        # speed but 0; at rest in Jog is a jog ending, whatever came before. A jog too short
+        # for its prepared segments to speed up (a 0.01 mm step) reports Jog with FS:0 as it
+        # starts: a 0x85 then lands in its last moments and leaves Grbl 1.1h suspended,
+        # answering no line (firmware-facts §3.8; fuzz, Grbl over Wi-Fi, after a reset: the
+        # settings could not be read again and every later press was ignored).
         feed = report.feed
         if report.state != "Jog":
             self._jog_unbraked = False
             self._prev_feed_mm_min = None
         elif feed is None or self._prev_feed_mm_min is None:
-            self._jog_unbraked = True
+            self._jog_unbraked = feed is None or feed > 0.0
             self._prev_feed_mm_min = feed
         else:
             self._jog_unbraked = feed > 0.0 and feed >= self._prev_feed_mm_min
