@@ -595,17 +595,20 @@ def _rest_after(trace: list[TraceSegment], t_s: float, start: int) -> float:
 def _recover(session: _Session) -> bool:
     """The operator between sequences: `$X` after an alarm, a reset (then `$X`) when stuck.
 
-    The host's model knows no state (None) while it shakes hands again after a reset: wait.
+    The host's model knows no state (None) while it shakes hands again after a reset, and it
+    reads the settings again after that: wait for both. (Its reports say Idle while it
+    watches a restarted controller before reading it; a probe pressed then was released
+    before the settings were read, and counted as a wedge.)
     """
     vs = session.vs
     deadline_s = vs.now_s + 10.0
     while vs.now_s < deadline_s:
         vs.run_until(vs.now_s + 0.3)
         state = session.model.state
+        if state is None or vs.host.rehandshaking:
+            continue
         if state == "Idle":
             return True
-        if state is None:
-            continue
         if state == "Alarm":
             with contextlib.suppress(SmoothjogError, TimeoutError):
                 vs.query_line("$X")
