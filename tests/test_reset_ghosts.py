@@ -141,3 +141,30 @@ def test_machine_commands_wait_in_words_while_a_restarted_controller_is_read() -
     assert not vs.host.rehandshaking
     assert control.refusal() is None
     vs.close()
+
+
+def test_a_restarted_grbl_that_answers_no_line_is_sent_one_cycle_start(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A 0x85 that reached Grbl 1.1h as a jog ended leaves it reporting Idle and answering no
+    line (firmware-facts §3.8): the settings could never be read again. The re-handshake sends
+    `~` once, which releases it, and reads them."""
+    from smoothjog.core.errors import ConnectError
+    from smoothjog.host import Host
+
+    failures = [ConnectError("simulated grbl did not answer '$I' within 5.0 s")]
+    real = Host._handshake
+
+    async def handshake(self: Host) -> None:
+        if failures and self.rehandshaking:  # the first reading after the reset
+            raise failures.pop()
+        await real(self)
+
+    monkeypatch.setattr(Host, "_handshake", handshake)
+    vs, t_reset, written = _reset_then_press("grbl")
+    cycle_starts = [t for t, data in written if data == b"~"]
+    assert len(cycle_starts) == 1
+    assert cycle_starts[0] > t_reset
+    assert not vs.host.rehandshaking
+    assert vs.host.error is None
+    vs.close()

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
+from smoothjog.core.firmware import firmware_facts
 from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.core.jogger import (
     EngineEvent,
@@ -42,7 +43,7 @@ from smoothjog.core.jogger import (
 )
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
-from smoothjog.core.realtime import JOG_CANCEL, RESET, STATUS_QUERY
+from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, RESET, STATUS_QUERY
 from smoothjog.core.responses import (
     Banner,
     BuildOptions,
@@ -687,6 +688,7 @@ class Host:
 
         async def run() -> None:
             told = False
+            released = False
             try:
                 await self._settle_restart()
                 while True:
@@ -708,6 +710,19 @@ class Host:
                                 " settings again then, and jogs after that",
                             )
                         await self._until_resumed()
+                    except ConnectError:
+                        # A Grbl 1.1h that reports Idle and answers no line may be suspended by
+                        # a 0x85 that reached it as a jog ended (firmware-facts §3.8; one sent
+                        # for lines that started it after the reset can land there): `~`
+                        # releases it and does nothing in a plain Idle. Once; then give up.
+                        facts = firmware_facts(self.model.firmware).jog_cancel
+                        if released or not facts.late_cancel_suspends:
+                            raise
+                        if self.model.state != "Idle":
+                            raise
+                        released = True
+                        logger.info("the restarted controller answers no line: sending ~")
+                        self.send_realtime(HANDSHAKE, CYCLE_START)
                 self._engine().reset_machine(EngineLimits.from_model(self.model, self.keepouts))
             except SmoothjogError as exc:  # e.g. a controller that keeps resetting
                 self._fail(exc)
