@@ -605,8 +605,8 @@ def _recover(session: _Session) -> bool:
     while vs.now_s < deadline_s:
         vs.run_until(vs.now_s + 0.3)
         state = session.model.state
-        if state is None or vs.host.rehandshaking:
-            continue
+        if state is None or (vs.host.rehandshaking and state in ("Idle", "Jog")):
+            continue  # a held controller (Hold, Door) waits for the operator, below
         if state == "Idle":
             return True
         if state == "Alarm":
