@@ -51,12 +51,14 @@ def ghost_mm(firmware: str, link_name: str, delay_s: float) -> float:
         vs.close()
 
 
-def _names(text: str, known: list[str], what: str) -> list[str]:
+def _firmwares(text: str) -> list[str]:
+    """The firmware profiles named (comma-separated, or 'all'); SystemExit for an unknown one."""
+    known = list(FIRMWARE_PROFILES)
     names = known if text == "all" else [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in known]
     if unknown or not names:
         named = ", ".join(unknown) if unknown else repr(text)
-        raise SystemExit(f"unknown {what} {named}: use {', '.join(known)}")
+        raise SystemExit(f"unknown firmware {named}: use {', '.join(known)}")
     return names
 
 
@@ -86,8 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         help="press this long after the reset (default: 0,5,20)",
     )
     args = parser.parse_args(argv)
-    firmwares = _names(args.firmware, list(FIRMWARE_PROFILES), "firmware")
-    names = _names(args.links, list(LINK_MODELS), "link")
+    firmwares = _firmwares(args.firmware)
+    names = links.parse_names(args.links)
+    if not names:
+        raise SystemExit("python -m bench reset: no link to run")
     # Each run's reset is a fault the host logs; the table says what came of it.
     logging.getLogger("smoothjog").setLevel(logging.CRITICAL)
     started = time.monotonic()

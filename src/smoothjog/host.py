@@ -716,9 +716,7 @@ class Host:
                         # for lines that started it after the reset can land there): `~`
                         # releases it and does nothing in a plain Idle. Once; then give up.
                         facts = firmware_facts(self.model.firmware).jog_cancel
-                        if released or not facts.late_cancel_suspends:
-                            raise
-                        if self.model.state != "Idle":
+                        if released or not facts.late_cancel_suspends or self.model.state != "Idle":
                             raise
                         released = True
                         logger.info("the restarted controller answers no line: sending ~")

@@ -956,9 +956,9 @@ class Jogger:
         That is when the restarted controller has answered Idle to two `?`s in a row, both
         written after its banner (or after restart_wire_clear), the second after the first
         report came back. Each `?` went behind every line sent before it (the wire keeps the
-        order of bytes), and Grbl
-        parses a jog line within milliseconds once no cancel holds its main loop, so a line
-        still to start would show as Jog by the second (firmware-facts §3.7). Also true in a
+        order of bytes), and Grbl parses a jog line within milliseconds once no cancel holds
+        its main loop, so a line still to start would show as Jog by the second
+        (firmware-facts §3.7). Also true in a
         state that starts no jog (Alarm; Hold, Door and Sleep, which the re-handshake waits
         out, the cancel staying owed) and when no jog line was unanswered at the banner.
         """
@@ -1466,6 +1466,8 @@ class Jogger:
             (tuple(v - grow for v in zone.min_mm), tuple(v + grow for v in zone.max_mm))
             for zone in self.limits.keepouts
         ]
+        if not self._suspect_rest_clear(deltas, zones):
+            return False
         # The lines sent and not yet answered may be among those left unparsed: they run
         # first, one after another from the stopping point, so this line then starts that
         # much further on (after a reversal, further back: a hold that cut an X+ line short
@@ -1480,8 +1482,6 @@ class Jogger:
                     o + e - b for o, e, b in zip(offsets[-1], seg.end_mm, seg.start_mm, strict=True)
                 )
             )
-        if not self._suspect_rest_clear(deltas, zones):
-            return False
         # The path behind the machine (kept for late reports) is skipped by bisection: this
         # runs for every line sent near a zone.
         first = track.seg_index_at(x_mm) or 0
@@ -1523,17 +1523,13 @@ class Jogger:
             return True
         _built_s, rest_mm, seg = suspect
         track = self._track
-        after: list[Vec] = []
-        found = False
-        for piece in track.path:
-            if found:
-                after.append(
-                    tuple(e - b for e, b in zip(piece.end_mm, piece.start_mm, strict=True))
-                )
-            elif piece is seg:
-                found = True
-        if not found:
+        index = track.seg_index_at(rest_mm)
+        if index is None or track.path[index] is not seg:
             return True  # the path was begun afresh: the suspicion is moot
+        after = [
+            tuple(e - b for e, b in zip(piece.end_mm, piece.start_mm, strict=True))
+            for piece in track.path[index + 1 :]
+        ]
         rest = track.point_at(rest_mm)
         for first in range(len(after) + 1):
             point = rest
