@@ -11,7 +11,7 @@ from smoothjog.core.errors import JogBuildError
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent, StopIntent
 from smoothjog.core.jogger import JogTuning, Phase, SendLine
 from smoothjog.core.machine import KeepOut
-from smoothjog.core.responses import GcodeModes
+from smoothjog.core.responses import ErrorReply, GcodeModes
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile
 from smoothjog.sim.rig import LinkModel, SimRig
@@ -202,22 +202,29 @@ def test_random_press_release_reverse_is_safe_on_every_firmware(firmware: str) -
     assert report.clean, report
 
 
-def test_unhomed_machine_with_soft_limits_is_explained_not_jogged(tmp_path: object) -> None:
+def test_an_unhomed_machine_with_soft_limits_jogs_inside_the_envelope_it_believes() -> None:
+    # MPos 0,0,0 is what a power-up and $X without homing look like: the machine may sit on a
+    # limit switch and must be jogged off it (the pendant warns that it is unhomed).
     fw = GrblFirmware(get_firmware_profile("grbl"), "hobby-router")
     vs = VirtualHost(SimRig(fw, LinkModel()))
     vs.handshake()
-    vs.query_line("G53G0X0Y0Z0")  # MPos 0,0,0: what a power-up without homing looks like
+    vs.query_line("G53G0X0Y0Z0")
     vs.run_until(vs.now_s + 1.0)
     engine = vs.engine
     assert engine is not None
-    ok, reason = engine.can_jog()
-    assert not ok
-    assert reason is not None
-    assert "home" in reason
-    lines = sent_lines(vs)
+    assert engine.can_jog() == (True, None)
     vs.set_intent(ContinuousIntent({"X": -1.0}))
-    vs.run_until(vs.now_s + 0.3)
-    assert not [line for line in lines if line.startswith("$J=")]
+    vs.run_until(vs.now_s + 0.5)
+    vs.set_intent(ContinuousIntent({"X": 0.0}))
+    vs.run_until(vs.now_s + 1.0)
+    assert vs.rig.firmware.mpos_mm()[0] < -5.0
+    # Toward + the envelope (max 0) leaves no room: nothing is sent that Grbl would refuse.
+    vs.set_intent(ContinuousIntent({"X": 1.0}))
+    vs.run_until(vs.now_s + 2.0)
+    vs.set_intent(ContinuousIntent({"X": 0.0}))
+    vs.run_until(vs.now_s + 1.0)
+    assert vs.rig.firmware.mpos_mm()[0] <= 0.0
+    assert not [r for _, r in vs.received if isinstance(r, ErrorReply)]
 
 
 def test_alarm_state_blocks_jogging_with_a_reason() -> None:

@@ -799,18 +799,6 @@ STEP_ROWS = [
         Expect(Phase.STEPPING),
     ),
     row(
-        "steps-stop-when-jogging-is-no-longer-allowed",
-        [
-            *STEPPING,
-            report("Idle", (0.0, 0.0, 0.0)),  # looks unhomed with soft limits
-            sends(),
-            ok_all,
-            sends("0x85", "G4P0"),
-        ],
-        Expect(Phase.STOPPING),
-        soft_limits=True,
-    ),
-    row(
         "a-held-stick-waits-for-the-machine-position",
         [jog(), sends("?"), phase_is(Phase.IDLE), check(lambda h: h.engine.busy(), "held")],
         Expect(Phase.IDLE),
@@ -832,9 +820,6 @@ def test_steps_and_go_to(harness: dict[str, Any], script: list[Step], expect: Ex
 
 
 # ------------------------------------------------------------------------------ single checks
-UNHOMED = "soft limits are on but the machine looks unhomed"
-
-
 @pytest.mark.parametrize(
     ("state", "soft_limits", "mpos", "reason"),
     [
@@ -848,7 +833,8 @@ UNHOMED = "soft limits are on but the machine looks unhomed"
         pytest.param("Home", False, START_MPOS, "the controller is homing", id="home"),
         pytest.param("Sleep", False, START_MPOS, "asleep", id="sleep"),
         pytest.param("Tool", False, START_MPOS, "the controller is in state Tool", id="unknown"),
-        pytest.param("Idle", True, (0.0, 0.0, 0.0), UNHOMED, id="unhomed-soft-limits"),
+        # Unhomed (MPos 0 after $X) jogs, so a machine on a limit switch can be jogged off it.
+        pytest.param("Idle", True, (0.0, 0.0, 0.0), None, id="unhomed-soft-limits"),
         pytest.param("Idle", False, (0.0, 0.0, 0.0), None, id="at-zero-without-soft-limits"),
         pytest.param("Idle", True, START_MPOS, None, id="homed-soft-limits"),
     ],
@@ -1227,21 +1213,6 @@ CLIP_ROWS = [
             "steps_per_mm": (1e5, 1e5, 1e5),
             "envelope": TravelBox((-800.0, -800.0, -800.0), (0.00008, 0.0, 0.0)),
         },
-    ),
-    row(
-        "jog-stops-when-jogging-is-no-longer-allowed",
-        # A path through machine zero with soft limits on: from there it looks unhomed.
-        [
-            rest_at((-1.0, 0.0, 0.0)),
-            jog({"X": 1.0}),
-            sends_jogs,
-            ok_all,
-            report("Jog", (0.0, 0.0, 0.0)),
-            sends("0x85", "G4P0"),
-        ],
-        Expect(Phase.STOPPING),
-        soft_limits=True,
-        limits={"envelope": TravelBox((-800.0, -800.0, -800.0), (10.0, 10.0, 10.0))},
     ),
 ]
 

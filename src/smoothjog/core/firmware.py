@@ -80,6 +80,9 @@ class FirmwareFacts:
     version_marker: str | None = None
     #: An `$I` feedback line (without brackets, any case) that names this family, if any.
     info_line: str | None = None
+    #: `ALARM:N` codes after which the controller reads no line until a reset (its critical
+    #: event loop, firmware-facts §5.6a); Grbl 1.1h's hard and soft limit by default.
+    critical_alarms: frozenset[int] = frozenset({1, 2})
 
     @property
     def planner_usable_blocks(self) -> int:
@@ -119,6 +122,8 @@ GRBLHAL: Final = FirmwareFacts(
     jog_cancel=JogCancel(flushes_rx=True, drops_blocked_jog=False, feed_hold_cancels=False),
     jog_clip=JogClip.CLIP_IF_40,
     info_line="FIRMWARE:grblHAL",
+    # Hard and soft limit, E-stop, motor fault, I/O expander failure (alarms.h:alarm_is_critical).
+    critical_alarms=frozenset({1, 2, 10, 17, 20}),
 )
 
 FLUIDNC: Final = FirmwareFacts(

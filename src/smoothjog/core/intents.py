@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 from smoothjog.core.errors import JogBuildError
@@ -51,7 +51,14 @@ class GotoIntent:
 
 @dataclass(frozen=True)
 class StopIntent:
-    """Stop now (full cancel handshake) and drop any steps not yet sent."""
+    """Stop now (full cancel handshake) and drop any steps not yet sent.
+
+    by names who stopped, in words, for every page to see; release says it is the holder of a
+    held jog letting go of it (nothing to announce). Neither plays a part in equality.
+    """
+
+    by: str = field(default="", compare=False)
+    release: bool = field(default=False, compare=False)
 
 
 @dataclass(frozen=True)

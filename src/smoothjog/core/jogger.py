@@ -55,6 +55,7 @@ from smoothjog.core.responses import (
     Response,
     StatusReport,
 )
+from smoothjog.core.states import SLEEP_TEXT
 from smoothjog.core.stopper import StopHandshake, StopPhase
 from smoothjog.core.tracker import PathSeg, PathTracker
 from smoothjog.core.units import (
@@ -158,7 +159,7 @@ _STATE_REASONS = {
     "Check": "the controller is in check mode ($C): leave it before jogging",
     "Run": "the controller is running a program: jogging waits until it is idle",
     "Home": "the controller is homing: jogging waits until it is done",
-    "Sleep": "the controller is asleep: reset it to wake it",
+    "Sleep": SLEEP_TEXT,
 }
 
 
@@ -491,6 +492,9 @@ class Jogger:
         self._limits = limits
         self.stats = EngineStats()
         self.events: list[EngineEvent] = []
+        #: Set by the host just before a banner that follows a Ctrl-X it sent for the user:
+        #: that reset is told as news ("info"), not as a fault.
+        self.reset_expected = False
         self.phase = Phase.IDLE
         self._intent: ContinuousIntent | None = None
         self._acted_intent: ContinuousIntent | None = None
@@ -597,6 +601,8 @@ class Jogger:
         #: When the `?` of each Idle report in a row was written (None: not known).
         self._idle_asked_s: list[float | None] = []
         self._fault: tuple[str, str] | None = None
+        #: The fault an ALARM:N showed: it goes once a report shows the controller out of Alarm.
+        self._alarm_fault: tuple[str, str] | None = None
         #: A fault other than a refusal came since the last stop (see _finish_stop).
         self._path_faulted = False
         self._last_report: tuple[float, Vec] | None = None
@@ -814,6 +820,8 @@ class Jogger:
         """
         self._changed = True
         if isinstance(resp, StatusReport):
+            if self._alarm_fault is not None and resp.state != "Alarm":
+                self._alarm_over()
             fault = self._fault
             lead_mm = self._on_status(resp, now_s)
             wake_s = self._wake_at_s
@@ -831,6 +839,7 @@ class Jogger:
         if isinstance(resp, AlarmReply):
             info = alarm_info(resp.code)
             self._fault_now(now_s, f"ALARM:{resp.code} {info.meaning}", info.hint)
+            self._alarm_fault = self._fault
             self._abandon_motion()
         elif isinstance(resp, Banner):
             jogs = sum(1 for e in self._pending if _kind(e) == "jog")
@@ -840,11 +849,24 @@ class Jogger:
                 if jogs
                 else ""
             )
-            self._fault_now(
-                now_s,
-                f"the controller was reset (its banner arrived mid-session){lost}",
-                "check why it reset; smoothjog re-reads its settings before jogging again",
-            )
+            if self.reset_expected:
+                # The user's own reset: news, and no fault that would hide why jogs wait now.
+                self.reset_expected = False
+                self._path_faulted = True
+                self.events.append(
+                    EngineEvent(
+                        now_s,
+                        "info",
+                        f"the controller was reset{lost}",
+                        "smoothjog reads its settings again before jogging",
+                    )
+                )
+            else:
+                self._fault_now(
+                    now_s,
+                    f"the controller was reset (its banner arrived mid-session){lost}",
+                    "check why it reset; smoothjog re-reads its settings before jogging again",
+                )
             # Lines still on the wire when it restarted run as new jogs: owe them a cancel
             # (computed before the replies they will never get are forgotten), and send one at
             # once (reset_outputs).
@@ -2982,11 +3004,8 @@ class Jogger:
             return False, "waiting for the controller's first status report"
         if state not in JOG_STATES:
             return False, _state_reason(state)
-        if self.limits.envelope is not None and self.model.looks_unhomed():
-            return False, (
-                "soft limits are on but the machine looks unhomed (MPos is 0,0,0, so every jog "
-                "toward + would fail with error:15): home it with $H first"
-            )
+        # An unhomed machine (MPos 0,0,0 after $X) may jog: the envelope then lies where it was
+        # switched on, and a machine on a limit switch must be jogged off it. The page warns.
         return True, None
 
     def _fault_now(self, now_s: float, text: str, hint: str, *, refusal: bool = False) -> None:
@@ -3038,6 +3057,13 @@ class Jogger:
     def clear_fault(self) -> None:
         """Forget the last fault (the user saw it)."""
         self._fault = None
+
+    def _alarm_over(self) -> None:
+        """A report shows the controller out of Alarm ($X, $H, a reset into Idle): the alarm's
+        fault no longer holds, so it is not shown any more (a later fault stays)."""
+        if self._fault is self._alarm_fault:
+            self._fault = None
+        self._alarm_fault = None
 
 
 def _fmt(v: Sequence[float]) -> str:

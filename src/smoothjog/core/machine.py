@@ -311,6 +311,11 @@ class MachineModel:
     _report_axes: int | None = field(default=None, init=False, repr=False)
     # Any reply seen: a banner after this is a reset, not the power-up one.
     _talked: bool = field(default=False, init=False, repr=False)
+    # The critical alarm the controller waits in for a reset (None: none since the banner).
+    _critical_alarm: int | None = field(default=None, init=False, repr=False)
+    # A `$H` line is unanswered (homing_sent), and the state the reports showed before it.
+    _homing: bool = field(default=False, init=False, repr=False)
+    _state_before_homing: str | None = field(default=None, init=False, repr=False)
 
     # --- derived facts ---------------------------------------------------------------------
 
@@ -329,6 +334,17 @@ class MachineModel:
         if self._axis_letters is not None:
             return self._axis_letters
         return ALL_AXES[: self.n_axes]
+
+    @property
+    def reset_needed(self) -> bool:
+        """True from a critical `ALARM:N` (Grbl 1.1h: 1 hard limit, 2 soft limit) until the next
+        banner: the controller reads no line until it is reset (firmware-facts §5.6a)."""
+        return self._critical_alarm is not None
+
+    @property
+    def critical_alarm(self) -> int | None:
+        """The code of the alarm that makes reset_needed True, else None."""
+        return self._critical_alarm
 
     @property
     def homing_force_set_origin(self) -> bool:
@@ -413,6 +429,28 @@ class MachineModel:
 
     # --- pure setters -----------------------------------------------------------------------
 
+    def homing_sent(self) -> None:
+        """A `$H` line went to the controller: the state is Home until its reply.
+
+        Grbl 1.1h reads no line and makes no status report during the cycle; it answers a `?`
+        asked meanwhile once, as the cycle ends, still in Home (firmware-facts §5.6a). A report of
+        Idle or Alarm while the line waits was therefore made before the line was read.
+        """
+        if not self._homing:
+            self._state_before_homing = self.state
+        self._homing = True
+        self.state, self.substate = "Home", None
+
+    def homing_answered(self, ok: bool) -> None:
+        """The `$H` line got its reply: ok after the cycle (Grbl set Idle just before it), an
+        error when it never began (the state is then the one before it). The host asks for a
+        report at once, which shows where another firmware ended (grblHAL may stay in Alarm)."""
+        if not self._homing:
+            return
+        self._homing = False
+        if self.state == "Home":
+            self.state = "Idle" if ok else self._state_before_homing
+
     def set_keep_outs(self, zones: Sequence[KeepOut]) -> None:
         """Replace the keep-out zones (from the config); one naming an axis the machine lacks
         is refused."""
@@ -482,6 +520,9 @@ class MachineModel:
             # An ALARM:N always leaves the controller in Alarm (firmware-facts §2, §3.4, §5.6).
             self.last_alarm = response.code
             self.state, self.substate = "Alarm", None
+            self._homing = False  # a homing cycle that raised an alarm has ended
+            if response.code in for_model(self).critical_alarms:
+                self._critical_alarm = response.code
         elif isinstance(response, ErrorReply):
             self.last_error = response.code
         elif isinstance(response, Message):
@@ -504,6 +545,8 @@ class MachineModel:
     def _apply_status(self, report: StatusReport) -> None:
         """Take state, positions and the optional fields; derive the missing frame from WCO."""
         self.state, self.substate = report.state, report.substate
+        if self._homing and report.state in ("Idle", "Alarm"):
+            self.state = "Home"  # made before the `$H` line was read (homing_sent)
         if report.wco is not None:
             self.wco_mm = self._vec_to_mm(report.wco)
         mpos = self._vec_to_mm(report.mpos) if report.mpos is not None else None
@@ -551,6 +594,8 @@ class MachineModel:
         # cleared, overrides 100 %; MPos is kept (firmware-facts §3.4). WCO changed with G92/TLO,
         # and the first report after reset carries it again (firmware-facts §5.4), so forget ours.
         self.state, self.substate = None, None
+        self._critical_alarm = None
+        self._homing = False  # the reset ended the cycle and dropped the line
         self.wpos_mm, self.wco_mm = None, None
         self.buffer = None
         self._report_axes = None  # a rebuilt or reconfigured controller may have other axes
