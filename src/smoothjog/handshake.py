@@ -6,6 +6,10 @@ expected: a banner before the first answer (the reset that opening a USB port ca
 the middle (a reset: the handshake starts over, once), `[MSG:...]` chatter, an Alarm state in which
 some queries get `error:8`/`error:9` (noted, not fatal). An `ok` that arrives without the content
 its query must produce is a stale reply to a line sent before a reset, and is skipped.
+
+A query refused with `error:8` because the controller is busy (a startup line that moves after a
+reset, another program's jog) is asked again once a status report shows Idle or Alarm, for at most
+BUSY_WAIT_S in all; `read_controller` says which queries stayed unread.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import logging
 from dataclasses import dataclass
 from typing import Protocol
 
-from smoothjog.core.codes import describe_alarm, describe_error
+from smoothjog.core.codes import ERR_IDLE_ERROR, describe_alarm, describe_error
 from smoothjog.core.errors import ConnectError
 from smoothjog.core.machine import MachineModel
 from smoothjog.core.realtime import STATUS_QUERY
@@ -49,6 +53,12 @@ STATUS_CHECK_S = 1.0
 SUSPENDED_STATES = frozenset({"Hold", "Door", "Sleep"})
 #: Banners survived during one handshake (see handshake()).
 MAX_RESETS = 2
+#: How long, in all, queries refused with error:8 (the controller busy) are asked again (s).
+BUSY_WAIT_S = 5.0
+#: How often a busy controller's state is asked while waiting for it to rest (s).
+BUSY_POLL_S = 0.1
+#: States in which Grbl answers `$I`, `$$` and `$#` (`system.c:system_execute_line`).
+ANSWERING_STATES = frozenset({"Idle", "Alarm"})
 #: A status report is not made in some states (homing, after a limit alarm: firmware-facts §5.2).
 
 
@@ -105,6 +115,27 @@ class ControllerResetError(ConnectError):
         self.banner = banner
 
 
+@dataclass(frozen=True)
+class Unread:
+    """A query the controller refused to the end: its line, the error code, the last state seen."""
+
+    line: str
+    code: int
+    state: str | None
+
+
+@dataclass
+class HandshakeResult:
+    """The model the handshake filled, and the queries that stayed unread."""
+
+    model: MachineModel
+    unread: list[Unread]
+
+    def unread_line(self, line: str) -> Unread | None:
+        """The record of query line when it stayed unread, else None."""
+        return next((u for u in self.unread if u.line == line), None)
+
+
 @dataclass
 class QueryResult:
     """The final reply to one query and everything that came before it."""
@@ -132,6 +163,11 @@ class Querier:
         self.answered = 0
         self.foreign: list[bytes] = []
         self._foreign_run = 0
+        #: The state of the last status report read.
+        self.last_state: str | None = None
+        self.busy_wait_s = BUSY_WAIT_S
+        # When asking busy-refused queries again stops (None: none was refused yet).
+        self._busy_until_s: float | None = None
 
     async def settle(self, quiet_s: float = SETTLE_S) -> list[Response]:
         """Take in the lines already waiting (e.g. a banner) until quiet_s passes without any."""
@@ -148,11 +184,33 @@ class Querier:
         await self.link.send_line(query.line)
         return await self._collect(query.line, query.expects)
 
-    async def ask_status(self) -> StatusReport | None:
+    async def ask_when_idle(self, query: Query) -> QueryResult:
+        """ask(), asked again while the controller refuses it with error:8 (busy) and comes to
+        rest (Idle or Alarm) within the handshake's busy budget."""
+        result = await self.ask(query)
+        while _busy_refusal(result.reply) and await self._wait_for_rest():
+            result = await self.ask(query)
+        return result
+
+    async def _wait_for_rest(self) -> bool:
+        """Ask `?` until a report shows Idle or Alarm (True) or the busy budget is spent."""
+        loop = asyncio.get_running_loop()
+        if self._busy_until_s is None:
+            self._busy_until_s = loop.time() + self.busy_wait_s
+        while loop.time() < self._busy_until_s:
+            await asyncio.sleep(BUSY_POLL_S)
+            status = await self.ask_status(max(self._busy_until_s - loop.time(), 0.0))
+            if status is not None and status.state in SUSPENDED_STATES:
+                raise self._suspended(status)
+            if status is not None and status.state in ANSWERING_STATES:
+                return True
+        return False
+
+    async def ask_status(self, timeout_s: float | None = None) -> StatusReport | None:
         """Send `?` and wait for the status report; None when none comes in time."""
         self.link.send_realtime(STATUS_QUERY)
         loop = asyncio.get_running_loop()
-        deadline_s = loop.time() + self.timeout_s
+        deadline_s = loop.time() + (self.timeout_s if timeout_s is None else timeout_s)
         while True:
             response = await self._next(deadline_s)
             if response is None:
@@ -221,6 +279,8 @@ class Querier:
         response = parse_response(raw)
         if self.feed:
             self.model.apply(response)
+        if isinstance(response, StatusReport):
+            self.last_state = response.state
         if isinstance(response, Unparsed):
             self.foreign.append(raw)
             self._foreign_run += 1
@@ -278,6 +338,11 @@ class Querier:
         )
 
 
+def _busy_refusal(reply: Ok | ErrorReply) -> bool:
+    """True for error:8: the controller refused the query because it was not at rest."""
+    return isinstance(reply, ErrorReply) and reply.code == ERR_IDLE_ERROR
+
+
 async def handshake(
     link: QueryLink,
     *,
@@ -289,13 +354,30 @@ async def handshake(
 
     feed=False leaves folding the received lines into the model to the caller (the host).
     """
+    result = await read_controller(link, timeout_s=timeout_s, model=model, feed=feed)
+    return result.model
+
+
+async def read_controller(
+    link: QueryLink,
+    *,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    model: MachineModel | None = None,
+    feed: bool = True,
+    busy_wait_s: float = BUSY_WAIT_S,
+) -> HandshakeResult:
+    """handshake(), also saying which queries the controller refused to the end.
+
+    busy_wait_s bounds, in all, the asking again of queries refused because it was busy.
+    """
     target = model if model is not None else MachineModel()
     querier = Querier(link, target, timeout_s=timeout_s, feed=feed)
+    querier.busy_wait_s = busy_wait_s
     await querier.settle()
     resets = resets_after_answers = 0
     while True:
         try:
-            await _run_queries(querier)
+            unread = await _run_queries(querier)
         except ControllerResetError:
             # A banner before any answer is most likely the boot after opening the port (it came
             # later than open() waited), a banner after answers is a reset: the handshake
@@ -307,22 +389,25 @@ async def handshake(
             querier.answered = 0
             logger.info("controller reset during the handshake; starting over")
             continue
-        return target
+        return HandshakeResult(target, unread)
 
 
-async def _run_queries(querier: Querier) -> None:
-    """All queries in order, then the status report."""
+async def _run_queries(querier: Querier) -> list[Unread]:
+    """All queries in order, then the status report; the queries that stayed unread."""
+    unread: list[Unread] = []
     for query in QUERIES:
-        result = await querier.ask(query)
+        result = await querier.ask_when_idle(query)
         if isinstance(result.reply, ErrorReply):
-            # error:8/9 in Alarm or a busy state: the model keeps what it had (firmware-facts §1.2,
-            # §5.3).
+            # Refused to the end (a controller busy for longer than the budget): the model keeps
+            # what it had for this query (firmware-facts §1.2, §5.3).
             logger.info("%s answered %s", query.line, describe_error(result.reply.code))
+            unread.append(Unread(query.line, result.reply.code, querier.last_state))
     status = await querier.ask_status()
     if status is None:
         # Grbl makes no report while homing or after a limit alarm (firmware-facts §5.2): go on
         # without.
         logger.info("no status report within %s s", querier.timeout_s)
+    return unread
 
 
 # --- the readable summary -------------------------------------------------------------------

@@ -25,9 +25,11 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
+import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
+from smoothjog.core.codes import alarm_info, error_info
 from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
 from smoothjog.core.firmware import firmware_facts
 from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
@@ -45,6 +47,7 @@ from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, for
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, RESET, STATUS_QUERY
 from smoothjog.core.responses import (
+    AlarmReply,
     Banner,
     BuildOptions,
     ErrorReply,
@@ -61,7 +64,12 @@ from smoothjog.core.responses import (
     VersionInfo,
     parse_response,
 )
-from smoothjog.handshake import SUSPENDED_STATES, ControllerSuspendedError, handshake
+from smoothjog.handshake import (
+    SUSPENDED_STATES,
+    ControllerSuspendedError,
+    HandshakeResult,
+    read_controller,
+)
 from smoothjog.links.base import Link, encode_line
 
 logger = logging.getLogger(__name__)
@@ -146,6 +154,28 @@ RELAY_LOCK = "relay"
 
 #: Longest a Ctrl-X counts as pending without the banner that ends it (Host.reset_pending).
 RESET_PENDING_S = 2.0
+
+#: The jog-lock source of settings that could not be read (Host.set_jog_lock).
+SETTINGS_LOCK = "settings"
+
+#: A line that starts a homing cycle, once spaces are gone and letters are capitals (Grbl's
+#: line filter, firmware-facts §1.1): `$H`, or one axis (`$HX`, HOMING_SINGLE_AXIS_COMMANDS).
+_HOMING_LINE = re.compile(r"\$H[A-Z]?", re.ASCII)
+
+
+class ResetNeededError(ConnectError):
+    """The controller raised a critical alarm and reads no line until it is reset."""
+
+    def __init__(self, code: int, text: str, *, sent: bool = True) -> None:
+        """The error for console line text, left unanswered by ALARM:code (sent=False: held
+        back, since it would never be answered)."""
+        info = alarm_info(code)
+        what = "got no reply" if sent else "was not sent"
+        super().__init__(
+            f"{text!r} {what}: the controller raised ALARM:{code} ({info.name.lower()}:"
+            f" {info.meaning}) and answers no line until it is reset: press Reset (Ctrl-X)"
+        )
+        self.code = code
 
 
 class _QueryPort:
@@ -236,6 +266,10 @@ class Host:
         self._jog_locks: dict[str, str] = {}
         #: When somebody sent Ctrl-X, until the banner says the controller restarted.
         self._reset_sent_s: float | None = None
+        #: When smoothjog sent Ctrl-X for the user (the console's), until the banner.
+        self._user_reset_s: float | None = None
+        #: The unanswered `$H` line, whoever sent it (the model shows Home until its reply).
+        self._homing_entry: Entry | None = None
         self._reply_handlers: dict[str, Callable[[Entry, Ok | ErrorReply, float], None]] = {
             CONSOLE: _resolve_console_reply,
         }
@@ -345,6 +379,7 @@ class Host:
             await self._room.wait()
         async with self._write_lock:
             entry = self.ledger.record_line(owner, text, self.now_s(), tag)
+            self._note_homing(entry)
             await self.link.send_line(text)
         self._after_writer()
         return entry
@@ -361,6 +396,20 @@ class Host:
         self.link.send_realtime(byte)
         if byte == RESET and self._loop is not None:
             self._reset_sent_s = self._loop.time()
+            if owner == CONSOLE:
+                self._user_reset_s = self._reset_sent_s
+
+    def _user_reset_expected(self, now_s: float) -> bool:
+        """True when a banner now follows a Ctrl-X smoothjog sent for the user (the console's)
+        within RESET_PENDING_S: the reset was asked for, not a fault."""
+        sent_s, self._user_reset_s = self._user_reset_s, None
+        return sent_s is not None and now_s - sent_s <= RESET_PENDING_S
+
+    @property
+    def reset_needed(self) -> bool:
+        """True from a critical alarm (ALARM:1 or 2 on Grbl 1.1h) until the next banner: the
+        controller reads no line until it is reset (firmware-facts §5.6a)."""
+        return self.model.reset_needed
 
     @property
     def reset_pending(self) -> bool:
@@ -405,6 +454,9 @@ class Host:
     ) -> tuple[list[tuple[bytes, Response]], Ok | ErrorReply]:
         """Send a console line; (what it printed or everyone got, in order; its reply)."""
         loop = self._running_loop()
+        alarm = self.model.critical_alarm
+        if alarm is not None:
+            raise ResetNeededError(alarm, text, sent=False)  # no reply would ever come
         done: asyncio.Future[Ok | ErrorReply] = loop.create_future()
         seen: list[tuple[bytes, Response]] = []
 
@@ -430,7 +482,9 @@ class Host:
 
     async def reread_settings(self, *, timeout_s: float = 5.0) -> None:
         """Read `$$` again and give the engine the limits it now implies (only while idle)."""
-        await self.query("$$", timeout_s=timeout_s)
+        printed = await self.query("$$", timeout_s=timeout_s)
+        if isinstance(printed[-1], Ok) and any(isinstance(r, SettingLine) for r in printed):
+            self.set_jog_lock(SETTINGS_LOCK, None)  # read at last
         driver = self.driver
         if driver is not None and not driver.busy():
             driver.reset_machine(EngineLimits.from_model(self.model, self.keepouts))
@@ -469,12 +523,13 @@ class Host:
         job); `model.jog_lock` shows the oldest reason still standing, and the engine refuses
         jogs with it and stops a running jog with its full handshake.
         """
+        before = next(iter(self._jog_locks.values()), None)
         if reason is None:
             self._jog_locks.pop(source, None)
         else:
             self._jog_locks[source] = reason
         combined = next(iter(self._jog_locks.values()), None)
-        if combined != self.model.jog_lock:
+        if combined != before:
             logger.info("jogging %s", f"waits: {combined}" if combined else "may go on again")
         self.model.jog_lock = combined
         self._poke()
@@ -539,14 +594,19 @@ class Host:
             self._loop.call_soon(self._tick)
 
     async def _handshake(self) -> None:
+        """Read the controller into the model (at the start, or again after a reset)."""
         port = _QueryPort(self)
         self._port = port
         try:
-            await handshake(port, timeout_s=self.handshake_timeout_s, model=self.model, feed=False)
+            result = await read_controller(
+                port, timeout_s=self.handshake_timeout_s, model=self.model, feed=False
+            )
         finally:
             self._port = None
         # A relay's own unseen lines (CNCjs's `$G` poll) take RX bytes smoothjog cannot count.
         self.ledger.capacity_bytes = self.model.rx_buffer_bytes - self.link.rx_reserve_bytes()
+        again = self.rehandshaking
+        self.set_jog_lock(SETTINGS_LOCK, _settings_unread_reason(result, again=again))
 
     async def _reader(self) -> None:
         """For a link that cannot deliver lines by callback."""
@@ -568,7 +628,37 @@ class Host:
     def _on_wire_line(self, text: str, writer: str) -> None:
         """A relay put a line on the wire: confirm an own one or count a foreign writer's."""
         if self._reading:
-            self.ledger.on_echo(text, foreign(writer), self.now_s())
+            self._note_homing(self.ledger.on_echo(text, foreign(writer), self.now_s()))
+
+    def _note_homing(self, entry: Entry) -> None:
+        """A `$H` line (anyone's) is on its way: the model shows Home until its reply."""
+        if entry.owner != ENGINE and _HOMING_LINE.fullmatch("".join(entry.text.split()).upper()):
+            self._homing_entry = entry
+            self.model.homing_sent()
+            self._poke()  # the engine polls `?` at the moving rate from now on
+
+    def _homing_reply(self, entry: Entry | None, resp: Ok | ErrorReply) -> None:
+        """A reply came while a `$H` waits: end the Home shown at its own (or once it is gone)."""
+        homing = self._homing_entry
+        if homing is None:
+            return
+        if entry is not homing and any(e is homing for e in self.ledger.outstanding()):
+            return
+        self._homing_entry = None
+        self.model.homing_answered(entry is homing and isinstance(resp, Ok))
+        engine = self.engine
+        if engine is not None:
+            engine.ask_status()  # the state after the cycle, at once
+
+    def _on_alarm(self, alarm: AlarmReply) -> None:
+        """An ALARM:N arrived (already in the model): console lines that it leaves unanswered
+        until a reset fail now, in words, rather than at their timeout."""
+        if not self.model.reset_needed:
+            return  # the controller goes on reading lines: their replies come
+        for entry in self.ledger.outstanding(CONSOLE):
+            future = entry.tag
+            if isinstance(future, asyncio.Future) and not future.done():
+                future.set_exception(ResetNeededError(alarm.code, entry.text))
 
     def _on_relay_moved(self) -> None:
         """The relay saw the controller change (another client moved it): ask for a report."""
@@ -617,6 +707,8 @@ class Host:
         if isinstance(resp, Ok | ErrorReply):
             entry = route = self.ledger.on_reply()
             self._after_banner = False
+            if self._homing_entry is not None:
+                self._homing_reply(entry, resp)
             assert self._room is not None
             self._room.set()
             if entry is None:
@@ -643,15 +735,10 @@ class Host:
                 # With no line waiting the output is nobody's (a reply that came twice, say):
                 # the routed listeners, which hand out what is each owner's, do not get it.
                 orphan = route is None
+            if isinstance(resp, AlarmReply):
+                self._on_alarm(resp)
             if isinstance(resp, Banner):
-                self._after_banner = True
-                self._reset_sent_s = None
-                dropped = self.ledger.reset()
-                if dropped:
-                    logger.info("the controller reset with %d lines unanswered", len(dropped))
-                _fail_console_entries(dropped)
-                assert self._room is not None
-                self._room.set()
+                self._on_banner(now_s)
             if driver is not None and not driver.on_response(resp, now_s):
                 poke = False  # a routine report: the engine's own deadline comes soon enough
             if isinstance(resp, Banner) and driver is not None:
@@ -682,6 +769,23 @@ class Host:
         self._flush_events()
         if poke:
             self._poke()
+
+    def _on_banner(self, now_s: float) -> None:
+        """The controller restarted: its buffers are empty and every line unanswered is lost."""
+        self._after_banner = True
+        self._reset_sent_s = None
+        self._homing_entry = None
+        expected = self._user_reset_expected(now_s)
+        engine = self.engine
+        if engine is not None:
+            # Asked for by the user: the engine tells it as news, not as a fault.
+            engine.reset_expected = expected
+        dropped = self.ledger.reset()
+        if dropped:
+            logger.info("the controller reset with %d lines unanswered", len(dropped))
+        _fail_console_entries(dropped)
+        assert self._room is not None
+        self._room.set()
 
     def _start_rehandshake(self) -> None:
         """The controller reset mid-session: read its settings again before any jog."""
@@ -910,6 +1014,22 @@ class Host:
                     self.on_event(event)
                 except Exception:  # a listener's bug must not stop the machine's driver
                     logger.exception("an event listener failed")
+
+
+def _settings_unread_reason(result: HandshakeResult, *, again: bool) -> str | None:
+    """Why jogging must wait when `$$` stayed unread (the jog lock's words), else None."""
+    unread = result.unread_line("$$")
+    if unread is None:
+        return None
+    state = f" while it was in {unread.state}" if unread.state else ""
+    name = error_info(unread.code).name.lower()
+    why = f"$$ was refused with error:{unread.code} ({name}){state}"
+    if again:
+        return (
+            f"smoothjog could not read the controller's settings again after its reset: {why};"
+            " reset it or reconnect"
+        )
+    return f"smoothjog could not read the controller's settings: {why}; reconnect once it is idle"
 
 
 def _resolve_console_reply(entry: Entry, resp: Ok | ErrorReply, now_s: float) -> None:

@@ -287,7 +287,7 @@ class GrblFirmware:
         self.machine = machine
         self.n_axes = machine.n_axes
         self.on_eeprom_write = on_eeprom_write
-        self.settings = GrblSettings(self.n_axes, firmware.extra_settings)
+        self.settings = GrblSettings(self.n_axes, firmware.extra_settings, firmware.word_settings)
         machine.apply(self.settings)
         coords: tuple[Vec, ...] | None = None
         g28: Vec | None = None
@@ -1472,7 +1472,9 @@ class GrblFirmware:
             return self._reply(ERR_INVALID_STATEMENT)
         which = text[5]
         if which in "$*":
-            fresh = GrblSettings(self.n_axes, self.profile.extra_settings)
+            fresh = GrblSettings(
+                self.n_axes, self.profile.extra_settings, self.profile.word_settings
+            )
             for number, value in fresh.items():
                 self.settings.force(number, value)
             self._reconfigure_motion()
@@ -1599,7 +1601,9 @@ class GrblFirmware:
         Assumption: the switches sit at the corner of the current machine frame (MPos 0 for an
         axis homing to +, -$13x for one homing to -), so homing sets the same MPos Grbl would.
         The seek, locate and second pull-off of the real cycle are folded into one seek and one
-        pull-off; no status report is made meanwhile, as on the chip.
+        pull-off. No status report is made meanwhile, as on the chip (grblHAL makes them when
+        `$10` asks, see _homing_report); a `?` asked during the cycle is answered as it ends,
+        still in Home, with the homed position (mc_homing_cycle's protocol_execute_realtime).
         """
         if not step.started:
             step.started = True
@@ -1636,14 +1640,27 @@ class GrblFirmware:
             self._checkpoint(now_s)
             return True
         if self.motion.is_running() or not self.motion.planner_empty():
-            return False
+            return self._homing_report(now_s, during=True)
         self.motion.set_position_steps(step.final_steps)
         self.parser = self.parser.with_position(self._mpos_single_mm())
         self._rt &= ~EXEC_CYCLE_STOP
+        self._homing_report(now_s, during=False)
         self._steps.popleft()
         self.state = IDLE
         self._step_idle_delay(now_s)
         self._steps.appendleft(_Call(self._run_startup_lines))
+        return True
+
+    def _homing_report(self, now_s: float, *, during: bool) -> bool:
+        """Answer a pending `?` in Home: as the cycle ends (any firmware), or during it where
+        `$10` asks for that (grblHAL's when_homing bit, limits.c's homing loop); True if made."""
+        if not self._rt & EXEC_STATUS_REPORT:
+            return False
+        bit = self.profile.homing_report_bit
+        if during and (bit is None or not self.settings.int_value(10) >> bit & 1):
+            return False
+        self._rt &= ~EXEC_STATUS_REPORT
+        self._emit(now_s, self._status_report())
         return True
 
 

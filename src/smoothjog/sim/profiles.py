@@ -38,6 +38,11 @@ class FirmwareProfile:
     extra_settings: dict[int, float] = field(default_factory=dict)
     #: The blocking pause after an ALARM message (firmware-facts §5.3).
     alarm_pause_s: float = 0.5
+    #: Integer settings kept in 16 bits rather than one byte (grblHAL's `$10` report mask).
+    word_settings: frozenset[int] = frozenset()
+    #: The `$10` bit that asks for status reports during homing (grblHAL's bit 12,
+    #: `status_report.when_homing`, firmware-facts §5.6a); None: none are made (Grbl 1.1h).
+    homing_report_bit: int | None = None
 
     @property
     def name(self) -> str:
@@ -74,6 +79,8 @@ GRBLHAL = FirmwareProfile(
     realtime={**GRBL_REALTIME, **GRBLHAL_ALIASES},
     line_time_s=0.0003,
     extra_settings={40: 0},
+    word_settings=frozenset({10}),
+    homing_report_bit=12,
 )
 
 FLUIDNC = FirmwareProfile(

@@ -76,9 +76,16 @@ FLAG_SETTINGS = frozenset({4, 5, 6, 13, 20, 21, 22, 32})
 class GrblSettings:
     """The `$` settings of one simulated controller, with Grbl's store rules."""
 
-    def __init__(self, n_axes: int = 3, extra_defaults: Mapping[int, float] | None = None) -> None:
-        """Start from Grbl's defaults for n_axes axes plus a firmware's extra settings."""
+    def __init__(
+        self,
+        n_axes: int = 3,
+        extra_defaults: Mapping[int, float] | None = None,
+        word_settings: frozenset[int] = frozenset(),
+    ) -> None:
+        """Start from Grbl's defaults for n_axes axes plus a firmware's extra settings;
+        word_settings are integers kept in 16 bits rather than one byte."""
         self.n_axes = n_axes
+        self._word_settings = word_settings
         self._values: dict[int, float] = {}
         for number, value in GRBL_DEFAULTS.items():
             if number < STEPS_PER_MM_SETTING:
@@ -127,7 +134,7 @@ class GrblSettings:
             return STATUS_OK
         # Integer settings are single bytes in Grbl; a value above 255 wraps (assumed, as the
         # AVR's float-to-byte conversion does in practice).
-        int_value = math.trunc(value) % 256
+        int_value = math.trunc(value) % (65536 if number in self._word_settings else 256)
         if number == 0 and int_value < 3:
             return ERR_SETTING_STEP_PULSE_MIN
         if number == 20 and int_value and not self.int_value(22):
