@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from smoothjog.arbiter import STALL_GRACE_S, Arbiter, Lease
+from smoothjog.authority.arbiter import STALL_GRACE_S, Arbiter, Lease
 from smoothjog.core.errors import InputRefused, JogBuildError, SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
 from smoothjog.inputs.base import Input, InputHandle, LeaseExpired, Notice
@@ -404,10 +404,10 @@ def test_a_failing_stop_is_logged_and_the_arbiter_carries_on(
     _, pad = rig.attach("pad")
     pad.submit(JOG)
     rig.sink.raises[StopIntent] = RuntimeError("link gone")
-    with caplog.at_level(logging.ERROR, logger="smoothjog.arbiter"):
+    with caplog.at_level(logging.ERROR, logger="smoothjog.authority.arbiter"):
         rig.clock.advance(1.0)
     assert rig.arbiter.trips == 1
-    assert "failed to stop (dead-man)" in caplog.text
+    assert "failed to stop (the dead-man (nothing heard from pad" in caplog.text
 
 
 # -- release ---------------------------------------------------------------------------------------
@@ -743,3 +743,55 @@ def test_a_lost_link_with_nothing_held_refuses_nothing_later(rig: Rig) -> None:
     rig.arbiter.machine_lost()
     pad.submit(JOG)
     assert rig.sink.intents == [STOP, JOG]
+
+
+# -- a stop latches the held jog ----------------------------------------------------------------
+
+
+def test_a_watchers_stop_latches_the_held_jog_until_it_is_released(rig: Rig) -> None:
+    _, pad_h = rig.attach("pad")
+    _, page_h = rig.attach("#2 10.0.0.5", kind="web")
+    pad_h.submit(JOG)
+    page_h.submit(STOP)
+    stop = rig.sink.intents[-1]
+    assert isinstance(stop, StopIntent)
+    assert (stop.by, stop.release) == ("pendant #2 10.0.0.5", False)
+    # The held jog's next heartbeat must not undo the stop.
+    with pytest.raises(InputRefused, match=r"^pendant #2 10\.0\.0\.5 stopped this jog; release"):
+        pad_h.submit(JOG)
+    assert rig.sink.intents[-1] is stop
+    assert not rig.arbiter.lease_armed
+    pad_h.submit(NEUTRAL)
+    pad_h.submit(JOG)
+    assert rig.sink.intents[-1] == JOG
+
+
+def test_the_holders_own_stop_is_a_release_and_latches_nothing(rig: Rig) -> None:
+    _, pad_h = rig.attach("pad")
+    pad_h.submit(JOG)
+    pad_h.submit(STOP)
+    stop = rig.sink.intents[-1]
+    assert isinstance(stop, StopIntent)
+    assert (stop.by, stop.release) == ("gamepad pad", True)
+    pad_h.submit(JOG)
+    assert rig.sink.intents[-1] == JOG
+
+
+def test_a_stop_with_nothing_held_latches_nothing(rig: Rig) -> None:
+    _, pad_h = rig.attach("pad")
+    _, page_h = rig.attach("#2", kind="web")
+    page_h.submit(STOP)
+    stop = rig.sink.intents[-1]
+    assert isinstance(stop, StopIntent)
+    assert not stop.release
+    pad_h.submit(JOG)
+    assert rig.sink.intents[-1] == JOG
+
+
+def test_a_dead_man_stop_names_the_dead_man(rig: Rig) -> None:
+    _, pad_h = rig.attach("pad")
+    pad_h.submit(JOG)
+    rig.clock.advance(1.0)
+    stop = rig.sink.intents[-1]
+    assert isinstance(stop, StopIntent)
+    assert stop.by.startswith("the dead-man (nothing heard from pad for ")

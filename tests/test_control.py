@@ -9,8 +9,9 @@ from typing import TypeVar
 import pytest
 
 from smoothjog.control import CommandResult, ControlRefused, MachineControl
-from smoothjog.core.intents import ContinuousIntent, GotoIntent
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent
 from smoothjog.core.ledger import CONSOLE
+from smoothjog.core.responses import ErrorReply
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
 from smoothjog.sim.rig import SimRig
@@ -58,12 +59,22 @@ def test_unlock_leaves_alarm_but_an_unhomed_machine_still_may_not_jog(alarmed: V
     assert result == CommandResult("$X", True, ("[MSG:Caution: Unlocked]",))
     vh.run_until(vh.now_s + 0.3)
     assert vh.model.state == "Idle"
-    # Unlocked at MPos 0 with soft limits on: every + jog would fail (firmware-facts §2), so the
-    # engine still asks for homing; the pendant's warning beside Unlock says the same.
-    view = vh.host.view()
-    assert not view.can_jog
-    assert view.reason is not None
-    assert "home it with $H" in view.reason
+    # Unlocked at MPos 0 with soft limits on: the machine may sit on a limit switch, so it may be
+    # jogged (inside the envelope as it stands, firmware-facts §2), with a warning to home it.
+    from smoothjog.web.session_backend import UNHOMED_WARNING, SessionBackend
+
+    backend = SessionBackend(vh.host)
+    assert backend.can_jog() == (True, None)
+    assert backend.view()["warning"] == UNHOMED_WARNING
+    vh.set_intent(StepIntent("X", -5.0, 0.5))
+    vh.run_until(vh.now_s + 2.0)
+    assert vh.rig.firmware.mpos_mm()[0] == pytest.approx(-5.0)
+    assert backend.view()["warning"] is None
+    # Toward + there is no room inside the envelope: refused in words, nothing sent to fail.
+    vh.set_intent(StepIntent("X", 10.0, 0.5))
+    vh.run_until(vh.now_s + 2.0)
+    assert vh.rig.firmware.mpos_mm()[0] == pytest.approx(0.0, abs=0.02)  # one step inside
+    assert not [r for _, r in vh.received if isinstance(r, ErrorReply)]
 
 
 def test_home_runs_the_cycle_and_reads_the_modes_again(alarmed: VirtualHost) -> None:
@@ -201,16 +212,19 @@ def test_a_setting_changed_from_the_console_reaches_the_engine(vh: VirtualHost) 
     assert engine.limits.max_rate_mm_min[0] == 3000.0
 
 
-def test_nothing_is_sent_while_a_jog_moves(vh: VirtualHost) -> None:
+def test_no_line_is_sent_while_a_jog_moves(vh: VirtualHost) -> None:
     c = control(vh)
     vh.set_intent(ContinuousIntent({"X": -1.0}, 0.5))
     vh.run_until(vh.now_s + 0.3)
-    for command in (c.unlock(), c.console("$G"), c.set_work_zero(["X"]), c.override("feed", "+10")):
+    for command in (c.unlock(), c.console("$G"), c.set_work_zero(["X"])):
         with pytest.raises(ControlRefused, match="press STOP"):
             run(vh, command)
     stats = vh.host.ledger.stats
     assert stats.lines[CONSOLE] == 0
     assert stats.realtime[CONSOLE] == 0
+    # An override is a realtime byte for a running program; it changes no line and may go.
+    assert run(vh, c.override("feed", "+10")).ok
+    assert stats.realtime[CONSOLE] == 1
 
 
 def test_overrides_change_the_reported_values(vh: VirtualHost) -> None:
@@ -237,17 +251,26 @@ def test_soft_reset_restarts_and_the_host_reads_it_again(vh: VirtualHost) -> Non
     assert vh.rig.firmware.mpos_mm()[0] < -2.0
 
 
-def test_hold_then_resume_at_rest_and_resume_refused_elsewhere(vh: VirtualHost) -> None:
+def test_hold_then_resume_a_move_and_each_refused_where_it_means_nothing(vh: VirtualHost) -> None:
     c = control(vh)
     with pytest.raises(ControlRefused, match="nothing to resume: the machine is in Idle"):
         run(vh, c.resume())
+    # `!` in Idle would leave the controller in Hold:0 reading no line (firmware-facts §3.2).
+    with pytest.raises(ControlRefused, match="nothing to hold: the machine is in Idle"):
+        run(vh, c.hold())
+    realtime_before = vh.host.ledger.stats.realtime[CONSOLE]
+    assert run(vh, c.console("G1X-60F2000")).ok
+    vh.run_until(vh.now_s + 0.3)
+    assert vh.model.state == "Run"
     assert run(vh, c.hold()) == CommandResult("!", True)
-    vh.run_until(vh.now_s + 0.3)
+    vh.run_until(vh.now_s + 0.5)
     assert vh.model.state.startswith("Hold")
+    held_at = vh.rig.firmware.mpos_mm()[0]
     assert run(vh, c.resume()) == CommandResult("~", True)
-    vh.run_until(vh.now_s + 0.3)
+    vh.run_until(vh.now_s + 3.0)
     assert vh.model.state == "Idle"
-    assert vh.host.ledger.stats.realtime[CONSOLE] == 2
+    assert vh.rig.firmware.mpos_mm()[0] < held_at
+    assert vh.host.ledger.stats.realtime[CONSOLE] - realtime_before >= 2
 
 
 def test_a_hold_during_a_jog_ends_it_and_leaves_nothing_to_resume(vh: VirtualHost) -> None:
@@ -280,3 +303,26 @@ def test_while_another_program_holds_the_machine_lines_wait_but_reset_and_overri
     assert run(vh, c.soft_reset()).ok
     vh.host.set_jog_lock("sender", None)
     assert c.refusal() is None
+
+
+def test_reset_right_after_a_limit_alarm_restarts_the_controller(vh: VirtualHost) -> None:
+    """The console's own example on a machine whose coordinates are all <= 0: ALARM:2 at once;
+    the line ends then, and a Reset pressed at once still restarts the controller (sent again
+    past the moment Grbl 1.1h ignores it, firmware-facts §5.6a)."""
+    c = control(vh)
+    started_s = vh.now_s
+    result = run(vh, c.console("G0 X10"))
+    assert not result.ok
+    assert "ALARM:2" in (result.error or "")
+    assert vh.now_s - started_s < 1.0
+    assert vh.host.reset_needed
+    assert c.gate.command_refusal("reset") is None
+    assert c.gate.command_refusal("unlock") == (
+        "the controller stopped at a limit alarm and reads nothing until it is reset: press Reset"
+    )
+    resets = vh.model.reset_count
+    assert run(vh, c.soft_reset()).ok
+    assert vh.model.reset_count >= resets + 1
+    assert not vh.host.reset_needed
+    assert vh.model.state == "Alarm"
+    assert run(vh, c.unlock()).ok

@@ -1,4 +1,4 @@
-"""The layers import one way: core <- sim, links, inputs <- handshake, host, arbiter <- web, cli."""
+"""The layers import one way: core <- sim, links, inputs <- handshake, host <- authority <- cli."""
 
 from __future__ import annotations
 
@@ -21,22 +21,34 @@ ALLOWED: dict[str, set[str]] = {
     "inputs": {"core"},
     "handshake": {"core"},
     "host": {"core", "links", "handshake"},
-    "arbiter": {"core", "inputs"},
-    "control": {"core", "links", "host"},  # machine commands beside the engine, over the host
+    # Who may move the machine and what a stop does: the gate (over the host), the arbiter
+    # (which input speaks), the command catalogue.
+    "authority": {"core", "inputs", "links", "host"},
+    "control": {"core", "links", "host", "authority"},  # the catalogue's commands, run
     "virtual": {"core", "sim", "links", "inputs", "host", "vclock"},
     "config": {"core", "links"},  # it checks tcp:// URLs with the TCP link's own parser
     # The session's input devices: found (inputs), run under the arbiter, commands by control.
-    "devices": {"core", "links", "inputs", "host", "arbiter", "control", "config", "handshake"},
-    "web": {"core", "links", "sim", "host", "arbiter", "handshake", "config", "inputs", "control"},
+    "devices": {"core", "links", "inputs", "host", "authority", "control", "config", "handshake"},
+    "web": {
+        "core",
+        "links",
+        "sim",
+        "host",
+        "authority",
+        "handshake",
+        "config",
+        "inputs",
+        "control",
+    },
     # The sender's side of `smoothjog proxy`: its pty and TCP port, lines forwarded by the host.
-    "proxy": {"core", "links", "host", "pty_port"},
+    "proxy": {"core", "links", "host", "pty_port", "authority"},
     "cli": {
         "core",
         "sim",
         "links",
         "inputs",
         "host",
-        "arbiter",
+        "authority",
         "vclock",
         "virtual",
         "handshake",

@@ -21,7 +21,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
+from smoothjog.authority.commands import COMMAND_NAMES
 from smoothjog.config import DeviceConfig
 from smoothjog.control import ControlRefused, MachineControl
 from smoothjog.core.errors import ConfigError, InputRefused
@@ -130,23 +131,10 @@ class MachineCommands:
                 for target in c.work_zero_targets():
                     submit(GotoIntent(target, GOTO_SPEED))
                 return "going to work zero"
-            if command.name == "unlock":
-                result = await c.unlock()
-            elif command.name == "home":
-                result = await c.home()
-            elif command.name == "reset":
-                result = await c.soft_reset()
-            elif command.name == "zero":
-                axes = command.axes or c.host.model.axis_letters
-                result = await c.set_work_zero(axes)
-            elif command.name == "override":
-                result = await c.override(command.kind or "feed", command.step or "reset")
-            elif command.name == "hold":
-                result = await c.hold()
-            elif command.name == "resume":
-                result = await c.resume()
-            else:
+            if command.name not in COMMAND_NAMES:
                 return f"{command.name}: not a machine command"
+            kind, step = command.kind or "", command.step or ""
+            result = await c.run(command.name, axes=command.axes or (), kind=kind, step=step)
         except (ControlRefused, InputRefused) as exc:
             return f"{command.name} refused: {exc}"
         if result.ok:
@@ -170,7 +158,7 @@ def machine_view(control: MachineControl) -> Callable[[], DisplayView | None]:
             wpos_mm={a: m - w for a, m, w in zip(axes, mpos, wco, strict=False)},
             feed_mm_min=float(model.feed_mm_min or 0.0),
             spindle_rpm=float(model.spindle_rpm or 0.0),
-            state=model.state or "",
+            state=control.gate.shown_state(),
         )
 
     return view
@@ -380,27 +368,6 @@ def _udev_monitor(wake: Callable[[], None]) -> Callable[[], None] | None:
     return stop
 
 
-class HostSink:
-    """The arbiter's sink straight onto a host (no pendant): the engine's and the commands' say."""
-
-    def __init__(self, host: Host, control: MachineControl) -> None:
-        """Intents to host; jogs wait while control runs a command."""
-        self.host = host
-        self.control = control
-
-    def set_intent(self, intent: Intent) -> None:
-        """Hand the engine the intent."""
-        self.host.set_intent(intent)
-
-    def can_jog(self) -> tuple[bool, str | None]:
-        """The engine's verdict, and none while a machine command runs."""
-        busy = self.control.busy_reason()
-        if busy is not None:
-            return False, f"jogging waits: {busy}"
-        view = self.host.view()
-        return view.can_jog, view.reason
-
-
 @dataclass(frozen=True)
 class DeviceReplay:
     """A recorded device stream and the decoder kind that reads it (`jog --input-replay`)."""
@@ -413,7 +380,7 @@ class DeviceReplay:
     async def play(self, host: Host) -> list[str]:
         """Play the recording into host through the decoder and an arbiter; what it did."""
         control = MachineControl(host)
-        arbiter = Arbiter(HostSink(host, control))
+        arbiter = Arbiter(control.gate)
         found = FoundDevice(
             self.info.path, decoder_named(self.kind).transport, self.info, self.kind
         )

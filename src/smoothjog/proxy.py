@@ -57,14 +57,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from smoothjog.authority.gate import engine_has_motion
 from smoothjog.core.errors import LinkError, SmoothjogError
 from smoothjog.core.firmware import GRBL, for_model
 from smoothjog.core.gcode import preparse
-from smoothjog.core.jogger import Phase
 from smoothjog.core.ledger import Entry, foreign, line_cost_bytes
 from smoothjog.core.machine import MachineModel
 from smoothjog.core.realtime import EXTENDED_START, GRBLHAL_STOP, PRINTABLE_REALTIME, RESET
 from smoothjog.core.responses import Banner, ErrorReply, Ok, Response
+from smoothjog.core.states import SETTLED_STATES
 from smoothjog.host import Host
 from smoothjog.pty_port import PtyPort
 
@@ -89,8 +90,6 @@ LOOK_S = 0.02
 MAX_LINE_BUFFER_BYTES = 65536
 #: Sender lines that only ask (they never move the machine or change it), as Grbl stores them.
 QUERY_LINES = frozenset({"", "$", "$$", "$#", "$G", "$I", "$N"})
-#: States in which the sender's job is over (or never ran): nothing of it is moving.
-SETTLED_STATES = frozenset({"Idle", "Alarm", "Check", "Sleep"})
 
 _DEL = 0x7F
 _SUBSTITUTE = b"^"  # refused wherever DEL is (see the module doc)
@@ -442,7 +441,7 @@ class SenderProxy:
             if item is not None and resetting:
                 look = LOOK_S  # the banner's wait ends by time, too
             if ready and host is not None and item is not None:
-                if item.moves and _smoothjog_moving(host):
+                if item.moves and engine_has_motion(host):
                     # smoothjog's own jog is under way: the lock (set when the line came)
                     # stops it with the full handshake; the sender's line goes after.
                     if not held:
@@ -585,18 +584,6 @@ class SenderProxy:
 
     def _now(self) -> float:
         return asyncio.get_running_loop().time()
-
-
-def _smoothjog_moving(host: Host) -> bool:
-    """Whether smoothjog's own engine still has motion in hand (a jog, steps, its stop).
-
-    Under the lock an intent the engine merely holds (a stick still pressed) cannot start
-    anything, so only a phase other than idle counts for smoothjog's engine.
-    """
-    engine = host.engine
-    if engine is not None:
-        return engine.phase is not Phase.IDLE
-    return host.driver is not None and host.busy()
 
 
 # ------------------------------------------------------------------------ the sender's ports

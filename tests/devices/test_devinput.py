@@ -18,7 +18,7 @@ from typing import Any
 import evdev
 import pytest
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
 from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.core.options import Table
 from smoothjog.inputs import hidraw_source

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
 from smoothjog.config import parse_config
 from smoothjog.core.errors import ConfigError
 from smoothjog.core.intents import HandwheelIntent, Intent, StopIntent

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
 from smoothjog.core.errors import InputRefused
 from smoothjog.core.intents import ContinuousIntent, StopIntent
 from smoothjog.host import Host

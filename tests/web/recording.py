@@ -11,11 +11,33 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from smoothjog.authority.gate import StopRecord
 from smoothjog.control import CommandResult, ControlRefused
-from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent
+from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
 from smoothjog.web.protocol import CommandMessage
 
 AXES = ("X", "Y", "Z")
+#: The machine commands whose availability the view's control.commands states one by one.
+COMMANDS = (
+    "unlock",
+    "home",
+    "reset",
+    "zero",
+    "wcs",
+    "override",
+    "console",
+    "hold",
+    "resume",
+    "goto_zero",
+)
+#: What the status line offers in a scripted state when the test scripts no control: the way
+#: out the session offers there (session_backend's _offer, with homing on and no reset needed).
+STATE_OFFERS: dict[str, list[str]] = {
+    "Alarm": ["home", "unlock"],
+    "Hold": ["resume", "reset"],
+    "Door": ["resume", "reset"],
+    "Sleep": ["reset"],
+}
 
 
 @dataclass(frozen=True)
@@ -35,6 +57,8 @@ def default_view() -> dict[str, object]:
         "axes": list(AXES),
         "state": "Idle",
         "substate": None,
+        "link": "up",
+        "stop": None,
         "can_jog": True,
         "reason": None,
         "units": "mm",
@@ -46,6 +70,7 @@ def default_view() -> dict[str, object]:
         "stop_point_mpos": None,
         "queue": {"queued_mm": 0.0, "blocks": 0, "planner_blocks": 15},
         "fault": None,
+        "warning": None,
         "envelope": {"min_mm": [-300.0, -200.0, -80.0], "max_mm": [0.0, 0.0, 0.0]},
         "keepouts": [
             {"name": "vise", "min_mm": [-120.0, -60.0, -80.0], "max_mm": [-60.0, -20.0, 0.0]},
@@ -67,6 +92,8 @@ def default_view() -> dict[str, object]:
             "overrides": {"feed": 100, "rapid": 100, "spindle": 100},
             "modal": "G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0",
             "steps_per_mm": [80.0, 80.0, 400.0],
+            "commands": dict.fromkeys(COMMANDS),
+            "offer": [],
         },
     }
 
@@ -87,6 +114,7 @@ class RecordingBackend:
         #: What `command` answers per command name (a plain ok when absent).
         self.command_results: dict[str, CommandResult] = {}
         self.refuse_commands: str | None = None
+        self._stop_listeners: list[Callable[[StopRecord], None]] = []
 
     @staticmethod
     def now_s() -> float:
@@ -118,6 +146,17 @@ class RecordingBackend:
         else:
             self._record("stop")
             self._held = None
+            if isinstance(intent, StopIntent) and not intent.release:
+                self._tell_stop(intent.by or "an input")
+
+    def add_stop_listener(self, callback: Callable[[StopRecord], None]) -> None:
+        """Told of every StopIntent, as the real gate tells of every stop."""
+        self._stop_listeners.append(callback)
+
+    def _tell_stop(self, by: str) -> None:
+        record = StopRecord(by, ("cancel",), f"stopped by {by}: the jog was cancelled", 0.0)
+        for callback in list(self._stop_listeners):
+            callback(record)
 
     def can_jog(self) -> tuple[bool, str | None]:
         """The scripted view's can_jog and reason (the state when it gives no reason)."""
@@ -172,11 +211,20 @@ class RecordingBackend:
         """Change some keys of the scripted view.
 
         A scripted state other than Idle or Jog (Alarm, Hold, Door) stays what the view reports
-        while the crude motion runs down, as the machine's own report would.
+        while the crude motion runs down, as the machine's own report would. A scripted state
+        without a scripted control gets the offer of STATE_OFFERS (none for other states).
         """
         self.view_state.update(changes)
         if "state" in changes:
             self._scripted_state = changes["state"]
+            if "control" not in changes:
+                self.set_control(offer=list(STATE_OFFERS.get(str(changes["state"]), [])))
+
+    def set_control(self, **changes: object) -> None:
+        """Change some keys of the view's control object (commands, offer, can_command...)."""
+        control = self.view_state["control"]
+        assert isinstance(control, dict)
+        self.view_state["control"] = {**control, **changes}
 
     def named(self, name: str, since_s: float = -math.inf) -> list[Call]:
         """The calls of one method at or after since_s."""

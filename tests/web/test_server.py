@@ -42,15 +42,16 @@ async def open_ws(
 
 
 async def next_message(
-    ws: aiohttp.ClientWebSocketResponse, kind: str, timeout_s: float = 3.0
+    ws: aiohttp.ClientWebSocketResponse, kind: str, timeout_s: float = 3.0, *, stops: bool = False
 ) -> dict[str, Any]:
-    """The next server message of one type, skipping the others."""
+    """The next server message of one type, skipping the others (and, unless stops, the
+    "stopped" announcement every page gets of a stop)."""
     async with asyncio.timeout(timeout_s):
         while True:
             msg = await ws.receive()
             assert msg.type == aiohttp.WSMsgType.TEXT, f"socket ended: {msg}"
             data: dict[str, Any] = json.loads(msg.data)
-            if data["type"] == kind:
+            if data["type"] == kind and (stops or data.get("code") != "stopped"):
                 return data
 
 
@@ -231,14 +232,29 @@ async def test_a_watcher_cannot_jog_and_gets_control_when_the_jog_ends(
     await backend.wait_for(lambda: backend.named("jog_continuous"), what="the jog")
     await send(second, {"type": "take_control"})
     assert "holding a jog" in (await next_message(second, "error"))["text"]
-    # A watcher's STOP is the one thing it may send: any pendant's STOP stops the machine.
+    # A watcher's STOP is the one thing it may send: any pendant's STOP stops the machine,
+    # every page is told who stopped it, and the held jog's next heartbeat does not undo it.
     await send(second, {"type": "stop"})
     await backend.wait_for(lambda: backend.named("stop"), what="the watcher's stop")
-
+    for ws in (first, second):
+        told = await next_message(ws, "error", stops=True)
+        assert told == {
+            "type": "error",
+            "code": "stopped",
+            "text": "stopped by pendant #2 127.0.0.1: the jog was cancelled",
+        }
+    await send(first, JOG_X)
+    assert (await next_message(first, "error"))["text"] == (
+        "pendant #2 127.0.0.1 stopped this jog; release the controls and press again"
+    )
+    assert len(backend.named("jog_continuous")) == 1
+    # Released, then pressed anew: the jog goes again.
+    await send(first, {"type": "stop"})
+    await backend.wait_for(lambda: len(backend.named("stop")) == 2, what="the release")
     await send(first, JOG_X)
     await backend.wait_for(lambda: len(backend.named("jog_continuous")) == 2, what="jog again")
     await send(first, {"type": "stop"})
-    await backend.wait_for(lambda: len(backend.named("stop")) == 2, what="the stop")
+    await backend.wait_for(lambda: len(backend.named("stop")) == 3, what="the stop")
     await send(second, {"type": "take_control"})
     assert (await next_message(second, "role"))["role"] == "controller"
     await until_role(first, "watcher")

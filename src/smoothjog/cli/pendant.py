@@ -21,7 +21,7 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
 from smoothjog.cli.common import (
     add_connection_args,
     config_from_args,
@@ -278,6 +278,10 @@ async def run_session(
             tasks.append(asyncio.create_task(manager.run()))
         try:
             await asyncio.wait(ends, return_when=asyncio.FIRST_COMPLETED)
+            if waiter.done():
+                # Ctrl-C or SIGTERM: a stop like any other, whatever moves (a console line, a
+                # sender's job, homing), before the session lets go of the machine.
+                backend.gate.stop("a signal to smoothjog (Ctrl-C or SIGTERM)")
         finally:
             for task in tasks:
                 task.cancel()

@@ -1,9 +1,9 @@
 """The Input contract: what every device or script that produces jog intents implements.
 
 An input reads its device and submits intents through the `InputHandle` the arbiter gives it;
-the arbiter (smoothjog.arbiter) decides which input controls, watches the dead-man lease and
-stops the machine when the controlling input goes away. Adding a device is adding one file here
-with one `Input` subclass; nothing in this package knows of Grbl, links or sessions.
+the arbiter (smoothjog.authority.arbiter) decides which input controls, watches the dead-man
+lease and stops the machine when the controlling input goes away. Adding a device is adding one
+file here with one `Input` subclass; nothing in this package knows of Grbl, links or sessions.
 
 Rules every input follows:
 - `run(handle)` reads until the device ends; returning or raising both mean "the input is gone"

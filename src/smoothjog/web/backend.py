@@ -8,9 +8,10 @@ session implements it for real; tests implement it with a recorder.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Protocol, runtime_checkable
 
+from smoothjog.authority.gate import StopRecord
 from smoothjog.control import CommandResult
 from smoothjog.core.intents import Intent
 from smoothjog.web.protocol import CommandMessage
@@ -23,6 +24,7 @@ VIEW_KEYS: frozenset[str] = frozenset(
         "axes",
         "state",
         "substate",
+        "link",
         "can_jog",
         "reason",
         "units",
@@ -34,6 +36,8 @@ VIEW_KEYS: frozenset[str] = frozenset(
         "stop_point_mpos",
         "queue",
         "fault",
+        "stop",
+        "warning",
         "envelope",
         "keepouts",
         "max_rate_mm_min",
@@ -49,6 +53,8 @@ CONTROL_KEYS: frozenset[str] = frozenset(
     {
         "can_command",
         "reason",
+        "commands",
+        "offer",
         "running",
         "homing",
         "wcs",
@@ -69,6 +75,10 @@ class PendantBackend(Protocol):
     It is also the arbiter's IntentSink (set_intent, can_jog): the page's intents reach it only
     through the arbiter, which decides who controls and runs the dead-man.
     """
+
+    def add_stop_listener(self, callback: Callable[[StopRecord], None]) -> None:
+        """Call callback with every stop of the machine, whoever gave it (every page is told)."""
+        ...
 
     def set_intent(self, intent: Intent) -> None:
         """Take the newest intent; raises JogBuildError in words for one the machine cannot do.

@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final
 
+from smoothjog.authority.commands import COMMAND_NAMES
 from smoothjog.core.errors import SmoothjogError
 
 #: Bounds of a step jog in mm; outside them a click is surely a mistake (a typo or a bad unit).
@@ -74,17 +75,6 @@ class PingMessage:
     id: int
 
 
-#: Machine commands the page may ask for, and what each needs beside its name.
-COMMAND_NAMES: Final = (
-    "unlock",
-    "home",
-    "reset",
-    "zero",
-    "goto_zero",
-    "wcs",
-    "override",
-    "console",
-)
 #: The longest console line accepted from the page (grblHAL reads 256 characters).
 CONSOLE_MAX_CHARS: Final = 256
 

@@ -3,11 +3,11 @@
 aiohttp was chosen because it is a mature asyncio HTTP server with first-class WebSocket
 support, so the pendant shares the event loop (and its clock) with the jog session.
 
-Each connected page is one input of the session's Arbiter (smoothjog.arbiter), which enforces
-the safety rules for every input (docs/pendant.md explains them for users): one controlling
-input at a time, the others watch; a held jog stops when the page's heartbeat is silent for
-`deadman_s` (its lease) or when the controlling page's WebSocket closes. Enforced here: every
-request passes the guard middleware: Host (loopback mode), pairing token (LAN mode), and for
+Each connected page is one input of the session's Arbiter (smoothjog.authority.arbiter), which
+enforces the safety rules for every input (docs/pendant.md explains them for users): one
+controlling input at a time, the others watch; a held jog stops when the page's heartbeat is
+silent for `deadman_s` (its lease) or when the controlling page's WebSocket closes. Enforced here:
+every request passes the guard middleware: Host (loopback mode), pairing token (LAN mode), and for
 /ws the Origin, which must be the host the page was served from.
 """
 
@@ -29,7 +29,8 @@ from typing import Final
 import segno
 from aiohttp import WSMsgType, web
 
-from smoothjog.arbiter import Arbiter
+from smoothjog.authority.arbiter import Arbiter
+from smoothjog.authority.gate import StopRecord
 from smoothjog.config import DEFAULT_HTTP_PORT
 from smoothjog.control import ControlRefused
 from smoothjog.core.errors import InputRefused, SmoothjogError
@@ -177,6 +178,7 @@ class PendantHub:
             )
         self.arbiter.add_listener(self._control_changed)
         self.arbiter.add_notice_listener(self._announce)
+        self.backend.add_stop_listener(self._stopped)
 
     @property
     def controller(self) -> WebInput | None:
@@ -218,6 +220,12 @@ class PendantHub:
     def _announce(self, text: str) -> None:
         # A device's sentence (unplugged, asleep, refused): every page shows it.
         message = dumps(error_message(text, code="device"))
+        for page in list(self.clients):
+            _spawn(self.send(page, message))
+
+    def _stopped(self, record: StopRecord) -> None:
+        # Every page hears who stopped the machine; a page holding a jog lets go of it.
+        message = dumps(error_message(record.text, code="stopped"))
         for page in list(self.clients):
             _spawn(self.send(page, message))
 

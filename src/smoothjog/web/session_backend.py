@@ -1,22 +1,29 @@
-"""The pendant's backend for real: intents the arbiter lets through go to the host's engine.
+"""The pendant's backend for real: intents the arbiter lets through go to the session's gate.
 
 Every method returns at once (the engine only records the intent; the session's ticker acts on
-it). Invalid intents raise JogBuildError, which the arbiter reports to the page in words.
+it). Invalid intents raise JogBuildError, which the arbiter reports to the page in words. Whether
+a jog or a command may start, and what a stop does, is the MotionGate's say; this module only
+shows it.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
-from smoothjog.control import WCS_WORDS, CommandResult, ControlRefused, MachineControl
+from smoothjog.authority.commands import COMMAND_NAMES
+from smoothjog.authority.gate import MotionGate, StopRecord
+from smoothjog.control import WCS_WORDS, CommandResult, MachineControl
 from smoothjog.core.codes import describe_alarm
 from smoothjog.core.intents import Intent
 from smoothjog.host import Host
 from smoothjog.web.protocol import CommandMessage
 
-#: Why nothing may jog once the link is gone (the view's reason says the same).
-LINK_LOST = "the connection to the controller is lost"
+#: Said while jogging is allowed on a machine that looks unhomed (MPos 0 after an unlock).
+UNHOMED_WARNING = (
+    "the machine looks unhomed (MPos 0 after an unlock): soft limits count from where it was"
+    " switched on; jog it off a limit switch if you must, then home it with $H"
+)
 
 
 def _finite(values: object) -> list[float | None] | None:
@@ -45,6 +52,8 @@ class SessionBackend:
         self.session = session
         self.default_speed = default_speed
         self.control = control if control is not None else MachineControl(session)
+        #: The session's motion gate: who may move the machine, and what a stop does.
+        self.gate: MotionGate = self.control.gate
         engine = session.engine
         if engine is None:
             raise RuntimeError("SessionBackend needs a started Host")
@@ -57,25 +66,23 @@ class SessionBackend:
         if session.engine is None:
             raise RuntimeError("SessionBackend needs a started Host")
         self.session = session
-        self.control.host = session
+        self.control.attach(session)
         self.set_speed_ratios(
             {axis: r for axis, r in self._ratios.items() if axis in session.engine.limits.axes}
         )
 
     # ------------------------------------------------------------------ intents
     def set_intent(self, intent: Intent) -> None:
-        """Hand the engine the newest intent (the arbiter already let it through)."""
-        self.session.set_intent(intent)
+        """Hand the gate the newest intent (the arbiter already let it through)."""
+        self.gate.set_intent(intent)
 
     def can_jog(self) -> tuple[bool, str | None]:
-        """The engine's verdict, and no jog at all once the link to the controller is lost."""
-        if self.session.link_error is not None:
-            return False, LINK_LOST
-        busy = self.control.busy_reason()
-        if busy is not None:
-            return False, f"jogging waits: {busy}"
-        v = self.session.view()
-        return v.can_jog, v.reason
+        """The gate's verdict on a new jog."""
+        return self.gate.can_jog()
+
+    def add_stop_listener(self, callback: Callable[[StopRecord], None]) -> None:
+        """Every stop of the machine, whoever gave it (the gate tells)."""
+        self.gate.add_stop_listener(callback)
 
     def set_speed_ratios(self, ratios: Mapping[str, float]) -> None:
         """Per-axis top speed ratios in (0, 1]."""
@@ -85,36 +92,33 @@ class SessionBackend:
     # ------------------------------------------------------------------ machine control
     async def command(self, message: CommandMessage) -> CommandResult:
         """Run one machine command through the session's MachineControl."""
-        control = self.control
-        name = message.name
-        if name == "unlock":
-            return await control.unlock()
-        if name == "home":
-            return await control.home()
-        if name == "reset":
-            return await control.soft_reset()
-        if name == "zero":
-            return await control.set_work_zero(message.axes)
-        if name == "wcs":
-            return await control.select_wcs(message.wcs)
-        if name == "override":
-            return await control.override(message.kind, message.step)
-        if name == "console":
-            return await control.console(message.line)
-        raise ControlRefused(f"unknown command {name!r}")
+        m = message
+        return await self.control.run(
+            m.name, axes=m.axes, wcs=m.wcs, kind=m.kind, step=m.step, line=m.line
+        )
 
     def work_zero_targets(self) -> list[dict[str, float]]:
         """Z up to a safe height, then X and Y, then Z down to work zero (machine positions)."""
-        reason = self.control.refusal()
-        if reason is not None:
-            raise ControlRefused(reason)
         return self.control.work_zero_targets()
+
+    def _offer(self) -> list[str]:
+        """The one next action(s) the page offers beside the message, by state."""
+        session = self.session
+        state = self.gate.shown_state()
+        if state in ("Hold", "Door"):
+            return ["resume", "reset"]
+        if state == "Sleep" or (state == "Alarm" and session.reset_needed):
+            return ["reset"]
+        if state == "Alarm":
+            return ["home", "unlock"] if self.control.homing_enabled else ["unlock"]
+        return []
 
     def _control_view(self) -> dict[str, object]:
         session = self.session
         model = session.model
         control = self.control
         reason = control.refusal()
+        gate = self.gate
         offsets = {
             name: list(values)
             for name, values in model.offsets_mm.items()
@@ -124,6 +128,8 @@ class SessionBackend:
         return {
             "can_command": reason is None,
             "reason": reason,
+            "commands": {name: gate.command_refusal(name) for name in COMMAND_NAMES},
+            "offer": self._offer(),
             "running": control.running,
             "homing": control.homing_enabled,
             "wcs": model.modal.wcs,
@@ -136,6 +142,33 @@ class SessionBackend:
         }
 
     # ------------------------------------------------------------------ the snapshot
+    def _fault(self) -> dict[str, str] | None:
+        """The fault the page shows: the lost link first, then the engine's, then an alarm."""
+        session = self.session
+        if session.link_error is not None:
+            return {"text": str(session.link_error), "hint": "check the cable and restart"}
+        fault = session.view().fault
+        if fault is not None:
+            return {"text": fault[0], "hint": fault[1]}
+        model = session.model
+        if model.state == "Alarm" and model.last_alarm is not None:
+            return {"text": describe_alarm(model.last_alarm), "hint": ""}
+        return None
+
+    def _warning(self) -> str | None:
+        """What the page says beside a jog that may go but deserves care."""
+        model = self.session.model
+        if model.state == "Idle" and self.session.engine is not None and model.looks_unhomed():
+            return UNHOMED_WARNING
+        return None
+
+    def _stop_view(self) -> dict[str, object] | None:
+        """The last stop, for every page to say who stopped the machine and what it did."""
+        stop = self.gate.last_stop
+        if stop is None:
+            return None
+        return {"by": stop.by, "text": stop.text, "actions": list(stop.actions), "t_s": stop.t_s}
+
     def view(self) -> Mapping[str, object]:
         """Everything the page shows, in the documented keys."""
         session = self.session
@@ -145,23 +178,16 @@ class SessionBackend:
         model = session.model
         limits = engine.limits
         env = limits.envelope
-        fault: dict[str, str] | None = None
-        if v.fault is not None:
-            fault = {"text": v.fault[0], "hint": v.fault[1]}
-        elif session.link_error is not None:
-            fault = {"text": str(session.link_error), "hint": "check the cable and restart"}
-        elif model.state == "Alarm" and model.last_alarm is not None:
-            fault = {"text": describe_alarm(model.last_alarm), "hint": ""}
-        reason = v.reason
-        if session.link_error is not None:
-            reason = LINK_LOST
+        lost = session.link_error is not None
+        may_jog, reason = self.gate.can_jog()
         return {
             "t_s": v.t_s,
             "firmware": f"{model.firmware} {model.version or ''}".strip(),
             "axes": list(limits.axes),
-            "state": v.state or "Unknown",
+            "state": self.gate.shown_state(),
             "substate": v.substate,
-            "can_jog": v.can_jog and session.link_error is None,
+            "link": "lost" if lost else "up",
+            "can_jog": may_jog,
             "reason": reason,
             "units": "inch" if model.settings.report_inches else "mm",
             "mpos": _finite(v.mpos_mm),
@@ -175,7 +201,9 @@ class SessionBackend:
                 "blocks": v.queued_blocks,
                 "planner_blocks": limits.planner_blocks,
             },
-            "fault": fault,
+            "fault": self._fault(),
+            "warning": self._warning(),
+            "stop": self._stop_view(),
             "envelope": (
                 {"min_mm": list(env.min_mm), "max_mm": list(env.max_mm)}
                 if env is not None
@@ -188,6 +216,6 @@ class SessionBackend:
             "max_rate_mm_min": list(limits.max_rate_mm_min),
             "speed_ratios": dict(self._ratios),
             "default_speed": self.default_speed,
-            "moving": session.busy() or (v.state not in (None, "Idle", "Alarm", "Sleep")),
+            "moving": self.gate.machine_moving(),
             "control": self._control_view(),
         }

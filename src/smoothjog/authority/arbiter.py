@@ -5,7 +5,11 @@ Rules (docs/pendant.md states them for users):
   control with `take_control`, refused while the controller holds a continuous jog;
 - only the controller's intents reach the machine; a refused submit never does; the one
   exception is a stop, which any attached input may give (a STOP button on a device that is
-  only watching must still stop the machine, and stopping is never unsafe);
+  only watching must still stop the machine, and stopping is never unsafe); the stop names
+  who gave it, and the sink (the session's MotionGate) decides what it sends;
+- a stop latches: when another input stops the machine while the controller holds a jog, the
+  controller's continuous jogs are refused until it releases (neutral or stop), so its next
+  heartbeat cannot undo the stop;
 - a new jog (a step, a go-to, or a continuous intent while none is held) is first checked with
   the sink's `can_jog`; neutral and stop intents always pass and end the held jog;
 - a continuous jog from an input with a `lease_s` arms a dead-man lease that each continuous
@@ -149,8 +153,9 @@ class Arbiter:
         self._notice_listeners: list[Callable[[str], None]] = []
         #: How many times the dead-man lease ran out and stopped the machine.
         self.trips = 0
-        #: Inputs whose held jog the dead-man stopped and that have not released since.
-        self._tripped: set[_Handle] = set()
+        #: Inputs whose held jog was stopped (the dead-man, another input's STOP) and that have
+        #: not released since, with why their jogs wait.
+        self._tripped: dict[_Handle, str] = {}
         self._timer_due_s = 0.0
         #: The lease timer ran late once since the last renewal and was given STALL_GRACE_S.
         self._graced = False
@@ -240,9 +245,11 @@ class Arbiter:
         self.trips += 1
         name = "?" if holder is None else holder.input.name
         log.warning("dead-man: nothing heard from %s for %.0f ms, stopping", name, silent_s * 1e3)
-        self._halt("dead-man")
+        self._halt(f"the dead-man (nothing heard from {name} for {silent_s * 1e3:.0f} ms)")
         if holder is not None:
-            self._tripped.add(holder)
+            self._tripped[holder] = (
+                "the dead-man stopped this jog; release the controls and press again"
+            )
             try:
                 holder.input.notice(LeaseExpired(silent_s=silent_s, lease_s=lease.window_s))
             except Exception:  # an input that cannot show the notice must not hide the stop
@@ -255,32 +262,37 @@ class Arbiter:
         moment the link is back."""
         holder = self._controller
         if self._holding and holder is not None:
-            self._tripped.add(holder)
-        self._halt("the link to the controller was lost")
+            self._tripped[holder] = (
+                "the link to the controller was lost during this jog; release the controls and"
+                " press again"
+            )
+        self._halt("the lost link to the controller")
 
     # -- the rules behind the handles --------------------------------------------------------
 
     def _submit(self, handle: _Handle, intent: Intent, now_s: float) -> None:
         if isinstance(intent, StopIntent) and not handle.detached:
-            self._tripped.discard(handle)
+            self._tripped.pop(handle, None)
+            by = intent.by or _describe(handle)
+            letting_go = handle is self._controller and self._holding
+            self._latch_holder(handle, by)
             self._release()
-            self._forward(intent)
+            self._forward(StopIntent(by, release=letting_go))
             return
         self._require_in_control(handle)
         if isinstance(intent, StopIntent) or (
             isinstance(intent, ContinuousIntent) and intent.is_neutral()
         ):
-            self._tripped.discard(handle)
+            self._tripped.pop(handle, None)
             # A neutral stick with nothing held is no news; it must not cancel queued steps.
             if self._holding or isinstance(intent, StopIntent):
                 self._release()
                 self._forward(intent)
             return
         if isinstance(intent, ContinuousIntent):
-            if handle in self._tripped:
-                raise InputRefused(
-                    "the dead-man stopped this jog; release the controls and press again"
-                )
+            latched = self._tripped.get(handle)
+            if latched is not None:
+                raise InputRefused(latched)
             if not self._holding:
                 self._require_can_jog()
             try:
@@ -288,7 +300,7 @@ class Arbiter:
             except InputRefused:
                 if self._holding:
                     # The user changed the held jog into one we cannot do: the old one must end.
-                    self._halt("the held jog's new intent was refused")
+                    self._halt(f"{_describe(handle)} (its new jog was refused)")
                 raise
             self._holding = True
             if handle.input.lease_s is not None:
@@ -322,13 +334,13 @@ class Arbiter:
         if handle.detached:
             return
         handle.detached = True
-        self._tripped.discard(handle)
+        self._tripped.pop(handle, None)
         self._handles.remove(handle)
         log.info("%s input %s detached", handle.input.kind, handle.input.name)
         if handle is not self._controller:
             return
         if self._holding or self._motion:
-            self._halt(f"the controlling input {handle.input.name} went away")
+            self._halt(f"{_describe(handle)} going away")
         self._controller = None
         self._control_changed()
 
@@ -353,7 +365,7 @@ class Arbiter:
             ok, reason = self.sink.can_jog()
         except Exception as exc:  # the machine side may fail in any way; the machine must stop
             log.exception("the intent sink failed to say whether it can jog")
-            self._halt("the machine side failed")
+            self._halt("a failure on the machine side")
             raise InputRefused(str(exc)) from exc
         if not ok:
             raise InputRefused(f"jogging is disabled: {reason or 'the machine gives no reason'}")
@@ -366,7 +378,7 @@ class Arbiter:
             raise InputRefused(str(exc)) from exc
         except Exception as exc:  # the machine side may fail in any way; the machine must stop
             log.exception("the intent sink failed on %r", intent)
-            self._halt("the machine side failed")
+            self._halt("a failure on the machine side")
             raise InputRefused(str(exc)) from exc
 
     def _renew(self, window_s: float, now_s: float) -> None:
@@ -387,13 +399,20 @@ class Arbiter:
             self._timer.cancel()
             self._timer = None
 
-    def _halt(self, why: str) -> None:
-        """Stop the machine; a failing stop is logged loudly (nothing more can be done here)."""
+    def _latch_holder(self, stopper: _Handle, by: str) -> None:
+        """Someone else stopped the held jog: its input must release before it jogs again."""
+        holder = self._controller
+        if self._holding and holder is not None and holder is not stopper:
+            self._tripped[holder] = f"{by} stopped this jog; release the controls and press again"
+
+    def _halt(self, by: str) -> None:
+        """Stop the machine for by (who or what stops it, in words); a failing stop is logged
+        loudly (nothing more can be done here)."""
         self._release()
         try:
-            self.sink.set_intent(StopIntent())
+            self.sink.set_intent(StopIntent(by))
         except Exception:
-            log.exception("the intent sink failed to stop (%s)", why)
+            log.exception("the intent sink failed to stop (%s)", by)
 
     def _clock(self) -> Clock:
         return self._given_clock if self._given_clock is not None else asyncio.get_running_loop()
@@ -430,6 +449,13 @@ class Arbiter:
                 callback()
             except Exception:  # a broken listener must not undo a change of control
                 log.exception("an arbiter listener failed")
+
+
+def _describe(handle: _Handle) -> str:
+    """An input as a page names it: its kind's noun and its name ("pendant #2 10.0.0.5"), the
+    noun once where the name already starts with it ("gamepad Xbox Wireless Controller")."""
+    noun, name = kind_noun(handle.input.kind), handle.input.name
+    return name if name.lower().startswith(noun.lower()) else f"{noun} {name}"
 
 
 __all__ = ["Arbiter", "Cancellable", "Clock", "IntentSink", "Lease", "check_lease_s"]
