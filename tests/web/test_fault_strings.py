@@ -1,14 +1,16 @@
 """Every sentence the server sends the page (faults, hints, refusals, reasons) reads in Chinese.
 
 The sentences are not listed here: they are taken from the code that makes them with `ast` (every
-`_fault_now` of the engine, every JogBuildError, the arbiter's, the server's and the machine
-control's refusals, the link's losses, ...) and built the way that code builds them, each
-placeholder filled from SAMPLES or from the assignments, helpers and tables the code uses (the
-alarm and error tables, `_STATE_REASONS`, `_PIN_NAMES`). Each built sentence must match a pattern
-of SERVER_ZH in static/i18n.js (read from its lines) or be an alarm or error code, and its Chinese,
-put together by the same rules as translateServer(), must keep no English word but Grbl's words,
-units and the values passed through as sent. So a new fault without a translation fails here.
-Where node is installed, the real translateServer() gives the same Chinese as the rules here.
+`_fault_now` of the engine, every JogBuildError, the motion gate's refusals and stop sentences,
+the arbiter's latches and refusals, the server's and the machine control's refusals, the
+commands' `doing`, the host's and the link's losses, ...) and built the way that code builds
+them, each placeholder filled from SAMPLES or from the assignments, helpers and tables the code
+uses (the alarm and error tables, `_STATE_REASONS`, `_PIN_NAMES`, the command catalogue). Each
+built sentence must match a pattern of SERVER_ZH in static/i18n.js (read from its lines) or be an
+alarm or error code, and its Chinese, put together by the same rules as translateServer(), must
+keep no English word but Grbl's words, units and the values passed through as sent. So a new
+fault without a translation fails here. Where node is installed, the real translateServer() gives
+the same Chinese as the rules here.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import pytest
 
 from smoothjog.core.codes import ALARM_CODES, ERROR_CODES
 from smoothjog.core.errors import InputRefused, JogBuildError
+from smoothjog.core.intents import StopIntent
 from smoothjog.inputs.base import KIND_NOUNS
 from smoothjog.web.server import STATIC_DIR
 from tests.web.conftest import DESKTOP, OpenPage, StartPendant
@@ -416,6 +419,7 @@ def _refusal(text: str, cause: BaseException | None) -> InputRefused:
     return exc
 
 
+_GRBL_STATES = ["Idle", "Run", "Jog", "Home", "Hold", "Door", "Sleep", "Alarm", "Check"]
 _FAKE_LIMITS = SimpleNamespace(limits=SimpleNamespace(axes=("X", "Y", "Z")))
 _CODES = [SimpleNamespace(code=c) for c in (*range(1, 39), 40)]
 _SERIAL = SimpleNamespace(path="/dev/ttyUSB0", baud=115200)
@@ -427,8 +431,13 @@ _SIM = SimpleNamespace(
     ),
     rig=SimpleNamespace(link=SimpleNamespace(baud=115200)),
 )
-_RUNNING = ["homing", "unlocking", "resetting", "setting work zero", "a console line"]
-_RUNNING += ["selecting G54", "selecting G59"]
+
+
+def _running() -> list[str]:
+    """What a machine command shows while it runs: each Command's `doing` ("homing")."""
+    from smoothjog.authority.commands import CATALOGUE
+
+    return [c.doing for c in CATALOGUE.values()]
 
 
 def _describes() -> list[str]:
@@ -446,11 +455,29 @@ def _describes() -> list[str]:
 
 
 def _jog_locks() -> list[str]:
-    """Why another program holds the machine: a CNCjs job, a sender's job through the proxy."""
+    """Why jogging and lines wait: a CNCjs job, a sender's job through the proxy, settings the
+    host could not read (host.py _settings_unread_reason)."""
     from smoothjog.links.cncjs import _WORKFLOW_LOCKS
     from smoothjog.proxy import JOB_LOCK
 
-    return [*_WORKFLOW_LOCKS.values(), JOB_LOCK]
+    unread = method_returns("host.py", "_settings_unread_reason")
+    return [*_WORKFLOW_LOCKS.values(), JOB_LOCK, *unread]
+
+
+def _unread_results() -> list[SimpleNamespace]:
+    """A handshake's result with `$$` refused to the end (by code, in a state or none seen)."""
+    out = []
+    for code, state in ((8, "Run"), (8, "Home"), (40, None)):
+        unread = SimpleNamespace(line="$$", code=code, state=state)
+        out.append(SimpleNamespace(unread_line=lambda line, u=unread: u))
+    return out
+
+
+def _critical_alarms() -> list[int]:
+    """The alarms after which a controller reads no line until it is reset, in any firmware."""
+    from smoothjog.core.firmware import FIRMWARES
+
+    return sorted({code for facts in FIRMWARES.values() for code in facts.critical_alarms})
 
 
 def _pin_names() -> list[str]:
@@ -491,6 +518,38 @@ def _where_blocked(start: tuple[float, ...]) -> str:
 def _handles() -> list[SimpleNamespace]:
     kinds = [*KIND_NOUNS, "other"]
     return [SimpleNamespace(input=SimpleNamespace(kind=k, name="#2 10.0.0.5")) for k in kinds]
+
+
+def _device_handles() -> list[SimpleNamespace]:
+    """The physical devices as the arbiter holds them: the decoder's kind, the device's name."""
+    from smoothjog.inputs.kinds import decoder_named
+
+    return [
+        SimpleNamespace(input=SimpleNamespace(kind=decoder_named(n.split()[0]).kind, name=n))
+        for n in _DEVICE_NAMES
+    ]
+
+
+def _all_handles() -> list[SimpleNamespace]:
+    return [*_handles(), *_device_handles()]
+
+
+def _described() -> list[str]:
+    """Each input as a stop names it: a page's or a device's STOP (arbiter._submit)."""
+    describe = module("authority/arbiter.py").globals["_describe"]
+    return [describe(h) for h in _all_handles()]
+
+
+def _stop_bys() -> list[str]:
+    """Who stopped the machine, as the gate's stop sentence names them: an input's STOP, the
+    arbiter's own stops (the dead-man, a lost link, an input going away, ...), the gate's
+    default and the pendant's signal handler."""
+    return [
+        *_described(),
+        *call_args("authority/arbiter.py", "_halt", 0),
+        *call_args("authority/gate.py", "stop", 0),
+        *call_args("cli/pendant.py", "stop", 0),
+    ]
 
 
 # The physical input devices (devices.py, inputs/*.py).
@@ -611,36 +670,41 @@ SAMPLES: dict[str, Any] = {
     "jogline.line": ["$J=G21G91X1.5Y2.5Z0.5F1000"],
     "jogline.max_line_chars": [24],
     # The machine commands.
-    "control.self": lambda: [
-        SimpleNamespace(
-            running=r, host=SimpleNamespace(link_error=None, model=SimpleNamespace(jog_lock=lock))
-        )
-        for r in _RUNNING
-        for lock in _jog_locks()
-    ],
-    "control.what": _RUNNING,
+    "control.self": lambda: [SimpleNamespace(running=r) for r in _running()],
     "control.word": ["G54", "G60"],
+    "control.run.name": ["jump"],  # a command the catalogue lacks
     "control.axis": ["A"],
     "control.known": [("X", "Y", "Z")],
     "control.kind": ["feed", "rapid"],
     "control.step": ["+5"],
     "control.steps": [("reset", "+10", "-10")],
-    "control.resume.state": ["Idle", "an unknown state"],
     "control.text": ["G0 X100 Y100 Z-5 F1500 (a very long comment for this controller)"],
     "control.console.limit": [79],
     "control.reply": _CODES,
     "control.exc": SKIP,  # str(exc), str(host.error): another's words
-    "control.host": SKIP,
-    "control.reason": SKIP,  # what refusal() returns, built from refusal itself
-    # The arbiter and the server.
-    "arbiter.handle": _handles,
-    "arbiter._detached_text.handle": lambda: _handles()[:-1],
-    "arbiter.current": _handles,
-    "arbiter.reason": [
-        None,
-        "waiting for the controller's first status report",
-        "jogging waits: homing is running",
+    "control.reason": SKIP,  # the gate's command_refusal(), covered in authority/gate.py
+    # The motion gate (authority/gate.py) and the line table (core/states.py).
+    "gate.self": lambda: [
+        SimpleNamespace(running=r, host=SimpleNamespace(model=SimpleNamespace(jog_lock=lock)))
+        for r in _running()
+        for lock in _jog_locks()
     ],
+    "gate.jog_refusal.view": [SimpleNamespace(reason=None)],  # the engine's: jogger.can_jog
+    "gate.command_refusal.line": SKIP,  # line_refusal(), covered in core/states.py
+    "gate.command_refusal.name": SKIP,  # _state_refusal(), covered by its own returns
+    "gate._state_refusal.state": _GRBL_STATES,
+    "gate._stop_text.by": _stop_bys,
+    "gate.set_intent.intent": [StopIntent()],
+    "states.line_refusal.state": _GRBL_STATES,
+    # The arbiter and the server.
+    "arbiter.handle": _all_handles,
+    "arbiter._detached_text.handle": lambda: [*_handles()[:-1], *_device_handles()],
+    "arbiter.current": _all_handles,
+    "arbiter.reason": lambda: [None, *method_returns("authority/gate.py", "jog_refusal")],
+    "arbiter.check.name": ["#1 127.0.0.1"],  # the dead-man's: a page (only pages have a lease)
+    "arbiter.check.silent_s": [0.151],
+    "arbiter._latch_holder.by": _described,
+    "arbiter._submit.latched": SKIP,  # a latch text, covered where it is set (_tripped[...] =)
     "arbiter.exc": SKIP,
     "arbiter.attach.input_": SKIP,  # attaching is refused before any page exists
     "arbiter.check_lease_s.input_": SKIP,
@@ -651,12 +715,10 @@ SAMPLES: dict[str, Any] = {
     "server.poll_view.exc": [KeyError("mpos")],
     "server._announce.text": SKIP,  # a device's sentence (devices.py): not the server's
     "server.refuse.text": SKIP,  # refuse()'s own parameter: its callers are the sites
-    "session_backend.self": SKIP,  # the engine's and the control's words, covered there
-    "session_backend.v": SKIP,
+    "server._stopped.record": SKIP,  # the gate's stop sentence, covered in authority/gate.py
+    "session_backend.self": SKIP,  # the engine's, the gate's and the control's words
     "session_backend.session": SKIP,
     "session_backend.model": [SimpleNamespace(last_alarm=c) for c in (1, 2, 9, 12)],
-    "session_backend.can_jog.busy": lambda: [f"{r} is running" for r in _RUNNING],
-    "session_backend.name": ["jump"],
     # The link and the host.
     "base.text": ["G0 X1~"],
     "base.char": ["~", "\t"],
@@ -688,6 +750,9 @@ SAMPLES: dict[str, Any] = {
         for d in _describes()
     ],
     "host.text": ["$H"],
+    "host.__init__.code": _critical_alarms,  # ResetNeededError's
+    "host.__init__.sent": [True, False],
+    "host._settings_unread_reason.result": _unread_results,
     "host.timeout_s": [5.0],
     "host.entry": [SimpleNamespace(text="G10L20P0X0")],
     "host.exc": [KeyError("mpos")],
@@ -827,7 +892,7 @@ PASSTHROUGH = [
 LATIN_OK = {
     "smoothjog", "Grbl", "grblHAL", "FluidNC", "CNCjs", "Ctrl", "mm", "min", "Jog", "Run", "Hold",
     "ASCII", "EEPROM", "PWM", "JSON", "SpaceMouse", "Wi", "Fi", "udev", "hidraw",
-    "evdev", "spacenavd", "Lead",
+    "evdev", "spacenavd", "Lead", "SIGTERM",
 }  # fmt: skip
 #: Grbl's own words: `error:15`, `$J=`, `$X`, G- and axis words, quoted values as sent.
 GRBL_WORDS = re.compile(
@@ -902,6 +967,42 @@ def _dict_values(*keys: str) -> Pick:
     return pick
 
 
+def _item_assigned(attr: str) -> Pick:
+    """The values put into `self.<attr>[...]`."""
+
+    def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
+        if not isinstance(node, ast.Assign):
+            return []
+        for target in node.targets:
+            if (
+                isinstance(target, ast.Subscript)
+                and isinstance(target.value, ast.Attribute)
+                and target.value.attr == attr
+            ):
+                return [node.value]
+        return []
+
+    return pick
+
+
+def _constants(name: str) -> Pick:
+    """The module's own constants whose name fully matches the regex name."""
+
+    def pick(mod: Module, node: ast.AST) -> list[ast.expr]:
+        if not any(node is top for top in mod.tree.body):
+            return []
+        if isinstance(node, ast.AnnAssign) and node.value is not None:
+            targets, value = [node.target], node.value
+        elif isinstance(node, ast.Assign):
+            targets, value = node.targets, node.value
+        else:
+            return []
+        named = any(isinstance(t, ast.Name) and re.fullmatch(name, t.id) for t in targets)
+        return [value] if named else []
+
+    return pick
+
+
 @cache
 def fault_sites() -> list[Site]:
     """Every `self._fault_now(now_s, text, hint)` of the engine: its texts and its hints."""
@@ -917,6 +1018,17 @@ def jog_build_sites() -> list[Site]:
     ]
 
 
+ARBITER = "authority/arbiter.py"
+GATE = "authority/gate.py"
+#: What the gate says: why nothing, a jog or a command may start, and the stop sentence.
+GATE_TEXTS = (
+    "session_refusal",
+    "jog_refusal",
+    "busy_refusal",
+    "command_refusal",
+    "_state_refusal",
+    "_stop_text",
+)
 #: Where a link says it was lost or closed, and where a console line fails, mid-session.
 LINK_LOST = ("_lost", "close")
 CONSOLE_FAILED = ("_ask", "_fail_console_entries")
@@ -924,20 +1036,24 @@ CONSOLE_FAILED = ("_ask", "_fail_console_entries")
 
 @cache
 def other_sites() -> list[Site]:
-    """Why jogging is off, and what the server, arbiter, control and link tell the page."""
+    """Why jogging is off, and what the server, gate, arbiter, control, host and link tell the
+    page."""
     return [
         *_sites("core/jogger.py", _returns("can_jog", 1)),
-        *_sites("web/session_backend.py", _returns("can_jog", 1)),
         *_sites("web/session_backend.py", _dict_values("text", "hint")),
-        *_sites("web/session_backend.py", _calls("ControlRefused", 0)),
-        *_sites("control.py", _returns("refusal")),
-        *_sites("control.py", _returns("busy_reason")),
+        *_sites("web/session_backend.py", _returns("_warning")),  # the view's warning
+        *_sites("web/session_backend.py", _constants(r"[A-Z_]+_(?:TEXT|WARNING)")),
+        # The motion gate: why a jog, a command or a line waits, and who stopped what.
+        *_sites(GATE, _constants(r"[A-Z_]+_TEXT")),
+        *[site for method in GATE_TEXTS for site in _sites(GATE, _returns(method))],
+        *_sites("core/states.py", _returns("line_refusal")),
+        # Each command's `doing`: control.running, and "jogging waits: homing is running".
+        *_sites("authority/commands.py", _calls("Command", 1)),
         *_sites("control.py", _calls("ControlRefused", 0)),
         *_sites("control.py", _calls("CommandResult", 3, keyword="error")),
-        *_sites("control.py", _calls("_line", 1)),  # control.running, shown while it runs
-        *_sites("control.py", _calls("_running", 0)),
-        *_sites("arbiter.py", _calls("InputRefused", 0)),
-        *_sites("arbiter.py", _returns("_detached_text")),
+        *_sites(ARBITER, _calls("InputRefused", 0)),
+        *_sites(ARBITER, _returns("_detached_text")),
+        *_sites(ARBITER, _item_assigned("_tripped")),  # why a stopped input's jogs wait
         *_sites("web/server.py", _calls("refuse", 1)),
         *_sites("web/server.py", _calls("error_message", 0)),
         *_sites("links/base.py", _calls("RefusedError", 0), only=("encode_line",)),
@@ -948,6 +1064,10 @@ def other_sites() -> list[Site]:
         *_sites("cli/pendant.py", _calls("announce", 0)),  # the link back after a loss
         *_sites("host.py", _calls("LinkError", 0)),
         *_sites("host.py", _calls("ConnectError", 0), only=CONSOLE_FAILED),
+        # A console line a critical alarm leaves unanswered (ResetNeededError), and settings
+        # the host could not read (its jog lock: why jogs and lines wait).
+        *_sites("host.py", _calls("__init__", 0), only=("__init__",)),
+        *_sites("host.py", _returns("_settings_unread_reason")),
     ]
 
 
@@ -1014,6 +1134,25 @@ def test_every_fault_of_the_engine_is_found_and_built() -> None:
     assert len(jog_build_sites()) >= 25
     for site in [*fault_sites(), *jog_build_sites(), *other_sites()]:
         assert site.texts or site.source == "''", f"{site.where}: nothing built: {site.source}"
+
+
+def test_the_gate_arbiter_and_host_texts_are_found() -> None:
+    """A helper renamed or moved would leave its sentences unchecked: each is found and built."""
+    for method in GATE_TEXTS:
+        sites = _sites(GATE, _returns(method))
+        assert sites, f"{GATE}: no {method}()"
+        assert all(s.texts for s in sites), f"{GATE}: no texts from {method}()"
+    assert {t for s in _sites(GATE, _returns("_stop_text")) for t in s.texts} >= {
+        f"stopped by {by}: the jog was cancelled" for by in _stop_bys()
+    }
+    latches = _sites(ARBITER, _item_assigned("_tripped"))
+    assert len(latches) >= 3
+    assert all(s.texts for s in latches)
+    doing = [t for s in _sites("authority/commands.py", _calls("Command", 1)) for t in s.texts]
+    assert sorted(doing) == sorted(_running())
+    assert len(_sites("host.py", _calls("__init__", 0), only=("__init__",))) == 1
+    assert method_returns("host.py", "_settings_unread_reason")
+    assert method_returns("core/states.py", "line_refusal")
 
 
 def test_every_sentence_the_page_shows_has_a_pattern() -> None:

@@ -18,6 +18,8 @@ const CONSOLE_HISTORY = 50;
 const CONSOLE_LOG_LINES = 200;
 const FEED_STEPS = ["-10", "-1", "reset", "+1", "+10"];
 const RAPID_STEPS = ["25", "50", "100"];
+/** How long the status line tells who stopped the machine (s, by the view's clock). */
+const STOP_SHOWN_S = 10;
 
 const settings = loadSettings();
 let view = null;
@@ -29,6 +31,11 @@ let units = "mm";
 let droAxes = "";
 let stepUnits = "";
 let noticeTimer = null;
+let everOpen = false;
+/** performance.now() when the current view arrived: the server's time now is view.t_s plus
+ * what passed since (an idle view is not resent when only its t_s changes). */
+let viewAtMs = 0;
+let stopTimer = null;
 let commandId = 0;
 let zeroAxes = "";
 let wcsList = "";
@@ -37,7 +44,10 @@ const history = [];
 let historyAt = 0;
 
 const conn = new Connection({ onMessage, onOpen, onClose, onFrozen, onLink });
-const mixer = new JogMixer((m) => conn.send(m));
+const mixer = new JogMixer(
+  (m) => conn.send(m),
+  () => conn.drop(),
+);
 mixer.setSpeed(settings.speedPercent / 100);
 
 const shape = () => ({ deadzone: settings.deadzone, expo: settings.expo });
@@ -104,20 +114,13 @@ document.addEventListener("visibilitychange", () => {
 
 function onOpen() {
   connected = true;
-  const pill = $("conn");
-  pill.dataset.i18n = "conn.up";
-  pill.textContent = t("conn.up");
-  pill.className = "pill conn-up";
+  everOpen = true;
   refresh();
 }
 
 function onClose() {
   connected = false;
   role = null;
-  const pill = $("conn");
-  pill.dataset.i18n = "conn.down";
-  pill.textContent = t("conn.down");
-  pill.className = "pill conn-down";
   for (const [id, entry] of pending) {
     logConsole(entry.text, "err", t("result.failed", { command: entry.text, error: t("reason.offline") }));
     pending.delete(id);
@@ -163,13 +166,17 @@ function onMessage(msg) {
       if (percent !== settings.speedPercent) setSpeedPercent(percent, { byUser: false });
     }
     view = msg;
+    viewAtMs = performance.now();
     render();
     refresh();
+    scheduleStopExpiry();
   } else if (msg.type === "role") {
     onRole(msg);
   } else if (msg.type === "error") {
     // The server's dead-man stopped the held jog: it must not restart under the finger.
     if (msg.code === "deadman") mixer.trip();
+    // Some page (this one too) stopped the machine: a jog held here must be pressed again.
+    if (msg.code === "stopped") mixer.trip({ byOther: true });
     showNotice(translateServer(String(msg.text)));
   } else if (msg.type === "result") {
     onResult(msg);
@@ -209,59 +216,155 @@ function showNotice(text) {
 
 // -- enabling ---------------------------------------------------------------------------------
 
+/** The controller's link is lost (smoothjog runs, the machine does not answer it). */
+function linkLost() {
+  return view !== null && (view.link === "lost" || view.state === "Lost");
+}
+
 function refresh() {
   const isController = connected && role === "controller";
-  const allowed = isController && view !== null && view.can_jog === true;
-  if (allowed !== canJog) {
-    canJog = allowed;
-    if (!allowed) releaseAll();
-    mixer.setEnabled(allowed);
-    for (const s of sticks) s.setDisabled(!allowed);
-    for (const b of document.querySelectorAll("[data-jog]")) b.disabled = !allowed;
-    document.body.classList.toggle("jog-disabled", !allowed);
-  }
-  $("stop").disabled = !isController;
+  refreshJog(isController && view !== null && view.can_jog === true && !linkLost());
+  // STOP works from every page, watcher or not: stopping is never unsafe.
+  $("stop").disabled = !connected;
   document.body.classList.toggle("watcher", connected && role === "watcher");
-  const control = view?.control ?? null;
-  const mayCommand = isController && control !== null && control.can_command === true;
-  for (const el of document.querySelectorAll("[data-cmd]")) el.disabled = !mayCommand;
-  if (control) {
-    $("m-home").disabled = !mayCommand || control.homing !== true;
-    $("alarm-home").hidden = control.homing !== true;
-  }
-  for (const id of ["alarm-home", "alarm-unlock"]) $(id).disabled = !mayCommand;
+  refreshCommands();
   for (const el of document.querySelectorAll("#speed, .ratio, #inertial, #step-sizes button")) {
     el.disabled = !isController;
   }
-
-  let text = "";
-  let kind = "ok";
-  if (!connected) {
-    text = t("reason.offline");
-    kind = "warn";
-  } else if (role === "watcher") {
-    text = controlled ? t("reason.watch.other") : t("reason.watch.nobody");
-    kind = "warn";
-  } else if (view === null) {
-    text = t("reason.waiting");
-    kind = "warn";
-  } else if (view.fault) {
-    const hint = view.fault.hint ? ` ${translateServer(String(view.fault.hint))}` : "";
-    text = translateServer(String(view.fault.text ?? "")) + hint;
-    kind = "bad";
-  } else if (view.can_jog !== true) {
-    const shownState = t(`st.${view.state}`);
-    text = view.reason ? translateServer(String(view.reason)) : t("reason.state", { state: shownState });
-    kind = "warn";
-  } else {
-    text = t("status.ready");
-  }
+  showConn();
+  $("dro-table").classList.toggle("stale", !connected || linkLost());
+  const [text, kind] = statusLine();
   const status = $("status");
   status.className = `status status-${kind}`;
   $("status-text").textContent = text;
   status.title = text;
-  // In Alarm the way out is offered right where the message is.
-  $("status-actions").hidden = !(connected && view !== null && view.state === "Alarm");
+  showOffer();
+}
+
+function refreshJog(allowed) {
+  if (allowed === canJog) return;
+  canJog = allowed;
+  if (!allowed) releaseAll();
+  mixer.setEnabled(allowed);
+  for (const s of sticks) s.setDisabled(!allowed);
+  for (const b of document.querySelectorAll("[data-jog]")) b.disabled = !allowed;
+  document.body.classList.toggle("jog-disabled", !allowed);
+}
+
+/** The connection pill: this page's WebSocket, and the controller's link behind smoothjog. */
+function showConn() {
+  const lost = connected && linkLost();
+  let key = everOpen ? "conn.down" : "conn.connecting";
+  if (connected) key = lost ? "conn.lost" : "conn.up";
+  const pill = $("conn");
+  pill.dataset.i18n = key;
+  pill.textContent = t(key);
+  pill.className = `pill ${connected ? (lost ? "conn-lost" : "conn-up") : "conn-down"}`;
+  if (lost) pill.title = t("conn.lost.title");
+  else pill.removeAttribute("title");
+}
+
+/**
+ * Why a machine command cannot run now, in words, or null when it may.
+ *
+ * The server says it per command (control.commands: name -> null or a reason); an older one
+ * sends only can_command, one rule for all (and home only with homing on).
+ */
+function commandBlock(name) {
+  if (!connected) return t("reason.offline");
+  if (role !== "controller") return controlled ? t("reason.watch.other") : t("reason.watch.nobody");
+  const control = view?.control;
+  if (!control) return t("reason.waiting");
+  const commands = control.commands;
+  if (commands && typeof commands === "object" && Object.hasOwn(commands, name)) {
+    return commands[name] === null ? null : translateServer(String(commands[name]));
+  }
+  if (control.can_command !== true) {
+    return control.reason ? translateServer(String(control.reason)) : t("cmd.unavailable");
+  }
+  if (name === "home" && control.homing !== true) return t("cmd.nohoming");
+  return null;
+}
+
+/** Enable each machine control by its own command; a disabled one says why in its tooltip. */
+function refreshCommands() {
+  for (const el of document.querySelectorAll("[data-cmd], [data-offer]")) {
+    const why = commandBlock(el.dataset.cmd || el.dataset.offer);
+    el.disabled = why !== null;
+    if (why !== null) el.title = why;
+    else el.removeAttribute("title");
+  }
+}
+
+/** The commands the status line offers beside its message, in the server's order. */
+function offered() {
+  if (!connected || view === null) return [];
+  const offer = view.control?.offer;
+  if (Array.isArray(offer)) return offer.map(String);
+  // An older server offers nothing itself: in Alarm, home (with homing on) and unlock.
+  if (view.state !== "Alarm") return [];
+  return view.control?.homing === true ? ["home", "unlock"] : ["unlock"];
+}
+
+function showOffer() {
+  const offer = offered();
+  let shown = 0;
+  for (const b of document.querySelectorAll("#status-actions [data-offer]")) {
+    const at = offer.indexOf(b.dataset.offer);
+    b.hidden = at < 0;
+    b.style.order = String(at);
+    if (at >= 0) shown += 1;
+  }
+  $("status-actions").hidden = shown === 0;
+}
+
+/** The stop of the view while it is recent (STOP_SHOWN_S), else null. */
+function recentStop() {
+  const stop = view?.stop;
+  if (!stop || typeof stop !== "object" || !stop.text) return null;
+  return stopAgeS(stop) < STOP_SHOWN_S ? stop : null;
+}
+
+function stopAgeS(stop) {
+  const at = Number(stop.t_s);
+  if (!Number.isFinite(at) || !Number.isFinite(view.t_s)) return 0;
+  return view.t_s + (performance.now() - viewAtMs) / 1000 - at;
+}
+
+/** An idle machine sends no new view when the stop grows old: look again when it does. */
+function scheduleStopExpiry() {
+  clearTimeout(stopTimer);
+  const stop = recentStop();
+  if (stop === null) return;
+  stopTimer = setTimeout(refresh, (STOP_SHOWN_S - stopAgeS(stop)) * 1000 + 50);
+}
+
+/** The one status line: [text, kind]; a fault, who stopped, watching, why not, or ready. */
+function statusLine() {
+  if (!connected) return [t("reason.offline"), "warn"];
+  if (view === null) {
+    return role === "watcher" ? [watchingText(), "warn"] : [t("reason.waiting"), "warn"];
+  }
+  if (view.fault) {
+    const hint = view.fault.hint ? ` ${translateServer(String(view.fault.hint))}` : "";
+    return [translateServer(String(view.fault.text ?? "")) + hint, "bad"];
+  }
+  const stop = recentStop();
+  if (stop !== null) return [translateServer(String(stop.text)), "warn"];
+  if (role === "watcher") return [watchingText(), "warn"];
+  if (linkLost()) return [view.reason ? translateServer(String(view.reason)) : t("reason.lost"), "bad"];
+  if (view.can_jog !== true) {
+    const shownState = t(`st.${view.state}`);
+    const text = view.reason ? translateServer(String(view.reason)) : t("reason.state", { state: shownState });
+    return [text, "warn"];
+  }
+  // Jogging may go, but with care (an unhomed machine after an unlock).
+  if (view.warning) return [translateServer(String(view.warning)), "warn"];
+  return [t("status.ready"), "ok"];
+}
+
+function watchingText() {
+  return controlled ? t("reason.watch.other") : t("reason.watch.nobody");
 }
 
 // -- rendering --------------------------------------------------------------------------------
@@ -500,16 +603,16 @@ function renderControl(control) {
     row.replaceChildren();
     for (const a of axes) {
       row.append(
-        commandButton({ i18nDyn: "zero", axis: a }, () =>
+        commandButton({ cmd: "zero", i18nDyn: "zero", axis: a }, () =>
           command("zero", { axes: [a] }, t("machine.zero", { axis: a })),
         ),
       );
     }
     row.append(
-      commandButton({ i18n: "machine.zero.all", i18nAria: "machine.zero.all.aria" }, () =>
+      commandButton({ cmd: "zero", i18n: "machine.zero.all", i18nAria: "machine.zero.all.aria" }, () =>
         command("zero", { axes }, t("machine.zero.all")),
       ),
-      commandButton({ i18n: "machine.goto", i18nAria: "machine.goto.aria" }, () =>
+      commandButton({ cmd: "goto_zero", i18n: "machine.goto", i18nAria: "machine.goto.aria" }, () =>
         command("goto_zero", {}, t("machine.goto")),
       ),
     );
@@ -535,11 +638,10 @@ function renderControl(control) {
   $("m-running").textContent = control.running ? t("machine.running", { what: translateServer(String(control.running)) }) : "";
 }
 
-/** A machine-command button (enabled only when commands may run); data becomes its data-*. */
+/** A machine-command button (enabled only when data.cmd may run); data becomes its data-*. */
 function commandButton(data, onClick) {
   const b = document.createElement("button");
   b.type = "button";
-  b.dataset.cmd = "";
   Object.assign(b.dataset, data);
   b.addEventListener("click", onClick);
   return b;
@@ -566,7 +668,7 @@ function buildOverrides() {
     const box = $(`ov-${kind}-buttons`);
     box.replaceChildren();
     for (const step of steps) {
-      const b = commandButton({ ov: kind, step }, () =>
+      const b = commandButton({ cmd: "override", ov: kind, step }, () =>
         command("override", { kind, step }, `${t(`machine.ov.${kind}`)} ${step}`),
       );
       b.className = "tool";
@@ -583,14 +685,16 @@ for (const id of ["m-unlock", "alarm-unlock"]) {
     command("unlock", {}, "$X");
   });
 }
-$("m-reset").addEventListener("click", () => command("reset", {}, "Ctrl-X"));
+for (const id of ["m-reset", "offer-reset"]) $(id).addEventListener("click", () => command("reset", {}, "Ctrl-X"));
+$("m-hold").addEventListener("click", () => command("hold", {}, "!"));
+for (const id of ["m-resume", "offer-resume"]) $(id).addEventListener("click", () => command("resume", {}, "~"));
 $("wcs").addEventListener("change", (e) => command("wcs", { wcs: e.target.value }, e.target.value));
 
 $("console-form").addEventListener("submit", (e) => {
   e.preventDefault();
   const input = $("console-input");
   const line = input.value.trim();
-  if (!line) return;
+  if (!line || commandBlock("console") !== null) return;
   if (history[history.length - 1] !== line) history.push(line);
   while (history.length > CONSOLE_HISTORY) history.shift();
   historyAt = history.length;

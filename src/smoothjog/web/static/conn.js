@@ -59,6 +59,11 @@ export class Connection {
     return this.isOpen;
   }
 
+  /** Stop repeating the held jog without sending anything (the machine was stopped already). */
+  drop() {
+    if (this.worker) this.worker.postMessage({ op: "drop" });
+  }
+
   /** Send one message; false when not connected (the caller's intent is then simply lost). */
   send(message) {
     if (!this.isOpen || this.worker === null) return false;

@@ -2,7 +2,8 @@
 //
 // Key auto-repeat is ignored (a repeat is not a new intent), and every key counts as released
 // on key-up, when the window loses focus and when the page is hidden, because a key-up that
-// happens elsewhere is never delivered here.
+// happens elsewhere is never delivered here. Escape always stops, even with a modifier held or
+// from inside a text field (which it then leaves).
 
 export const KEY_ACTIONS = [
   ["X+", "X", 1],
@@ -67,19 +68,22 @@ export class KeyJog {
   }
 
   _down(e) {
+    const escape = e.code === "Escape" || e.key === "Escape";
     if (this.capture) {
       e.preventDefault();
       const cb = this.capture;
       this.capture = null;
-      cb(e.code === "Escape" ? null : e.code);
-      return;
+      cb(escape ? null : e.code);
+      if (!escape) return;
     }
-    if (isTextEntry(e.target) || e.ctrlKey || e.metaKey || e.altKey) return;
-    if (e.code === "Escape") {
+    if (escape) {
+      // Stopping is never unsafe: no field or modifier may keep Escape from it.
+      if (isTextEntry(e.target)) e.target.blur();
       this.held.clear();
       this.onStop();
       return;
     }
+    if (isTextEntry(e.target) || e.ctrlKey || e.metaKey || e.altKey) return;
     const action = this._action(e.code);
     if (!action) return;
     e.preventDefault(); // arrows and PageUp/PageDown would scroll the page

@@ -12,6 +12,7 @@
 // the heartbeats, and the server's dead-man does the rest.
 //
 // Messages from the page: {op: "connect", url}, {op: "send", msg}, {op: "alive"},
+// {op: "drop"} (forget the held jog: it was stopped from outside),
 // {op: "config", heartbeatMs, gateMs, windowMs}. To the page: {ev: "open"}, {ev: "close"},
 // {ev: "message", msg}, {ev: "frozen", silentMs}, {ev: "link", ...figures}.
 
@@ -102,6 +103,7 @@ function send(msg) {
   alive();
   if (msg.type === "jog") {
     if (frozen && !isNeutral(msg)) return; // the page has not released since the worker stopped
+    if (isNeutral(msg)) frozen = false; // a neutral jog is a release too
     held = isNeutral(msg) ? null : msg;
     if (held) lastBeatAt = performance.now();
   } else if (msg.type === "stop") {
@@ -167,6 +169,8 @@ self.onmessage = (e) => {
     send(m.msg);
   } else if (m.op === "alive") {
     alive();
+  } else if (m.op === "drop") {
+    held = null;
   } else if (m.op === "config") {
     if (Number.isFinite(m.heartbeatMs) && m.heartbeatMs > 0) heartbeatMs = m.heartbeatMs;
     if (Number.isFinite(m.gateMs) && m.gateMs > 0) gateMs = m.gateMs;

@@ -2,9 +2,10 @@
 //
 // Each input (XY stick, Z stick, keys, gamepad) sets its own contribution; the mixer sends a jog
 // when the sum changes and one stop the moment the sum returns to zero. The link worker repeats
-// the held jog as the heartbeat (linkworker.js). After a trip (the server's dead-man, or the
-// worker's stop for a frozen page) nothing moves until every input is released: a jog never
-// restarts by itself under the user's finger.
+// the held jog as the heartbeat (linkworker.js). After a trip (the server's dead-man, the
+// worker's stop for a frozen page, a stop from any page) nothing moves until every input is
+// released: a jog never restarts by itself under the user's finger. A stop is never blocked:
+// stopAll() sends one whether or not this page may jog.
 
 import { clamp, round3 } from "./shaping.js";
 
@@ -12,10 +13,13 @@ import { clamp, round3 } from "./shaping.js";
 const MIN_GAP_MS = 20;
 
 export class JogMixer {
-  /** send(message) delivers one JSON message. */
-  constructor(send) {
+  /** send(message) delivers one JSON message; drop() makes the link forget the held jog. */
+  constructor(send, drop = () => {}) {
     this.send = send;
+    this.drop = drop;
     this.tripped = false;
+    /** What the release after a trip sends: "stop" or "neutral" (see trip). */
+    this.releaseWith = "stop";
     this.axes = ["X", "Y", "Z"];
     this.sources = new Map();
     this.enabled = false;
@@ -55,15 +59,30 @@ export class JogMixer {
     if (this.sources.delete(source)) this._update();
   }
 
-  /** The jog was stopped from outside the page: hold nothing until every input is released. */
-  trip() {
+  /**
+   * The jog was stopped from outside the page: hold nothing until every input is released.
+   *
+   * The link stops repeating the held jog at once (the machine already stopped). The release
+   * then tells the server and the worker the trip is over: a stop after the dead-man or the
+   * worker's own stop (sent at once when nothing is held). After a stop someone gave (byOther)
+   * it is a neutral jog, which ends the server's latch without being a new stop every page is
+   * told of; with nothing held nothing is sent, else every page would answer every stop.
+   */
+  trip({ byOther = false } = {}) {
     this._cancelTimer();
+    this.drop();
     const was = this.active;
     this.active = false;
     this.last = null;
-    this.tripped = true;
     if (was) this.onActivity(false);
-    this._update();
+    if (this._moving()) {
+      // A dead-man trip still pending keeps its stop.
+      if (!this.tripped || !byOther) this.releaseWith = byOther ? "neutral" : "stop";
+      this.tripped = true;
+    } else if (!byOther) {
+      this.tripped = false;
+      this.send({ type: "stop" });
+    }
   }
 
   /** Drop every contribution and send a stop even if nothing was held (the STOP button). */
@@ -72,6 +91,8 @@ export class JogMixer {
     this._cancelTimer();
     this.active = false;
     this.last = null;
+    // This stop also ends a trip: the next press jogs again.
+    this.tripped = false;
     this.send({ type: "stop" });
     this.onActivity(false);
   }
@@ -88,14 +109,23 @@ export class JogMixer {
     return out;
   }
 
+  _moving() {
+    return this.enabled && Object.values(this.total()).some((v) => v !== 0);
+  }
+
   _update() {
     const t = this.total();
     const moving = this.enabled && Object.values(t).some((v) => v !== 0);
     if (this.tripped) {
       if (moving) return;
-      // Released after a trip: the stop also tells the server and the worker it is over.
+      // Released after a trip: this tells the server and the worker it is over.
       this.tripped = false;
-      this.send({ type: "stop" });
+      if (this.releaseWith === "neutral") {
+        const axes = Object.fromEntries(this.axes.map((a) => [a, 0]));
+        this.send({ type: "jog", axes, speed: round3(this.speed) });
+      } else {
+        this.send({ type: "stop" });
+      }
       return;
     }
     if (!moving) {
