@@ -318,7 +318,7 @@ def test_reset_right_after_a_limit_alarm_restarts_the_controller(vh: VirtualHost
     assert vh.host.reset_needed
     assert c.gate.command_refusal("reset") is None
     assert c.gate.command_refusal("unlock") == (
-        "the controller stopped at a limit alarm and reads nothing until it is reset: press Reset"
+        "the controller stopped at a critical alarm and reads nothing until it is reset: press Reset"
     )
     resets = vh.model.reset_count
     assert run(vh, c.soft_reset()).ok

@@ -38,6 +38,7 @@ from smoothjog.core.responses import (
     VersionInfo,
     parse_response,
 )
+from smoothjog.core.states import ACCEPTED_IN, SUSPENDED_STATES, LineKind
 from smoothjog.core.units import ALL_AXES
 
 logger = logging.getLogger(__name__)
@@ -49,8 +50,6 @@ FOREIGN_LINES_LIMIT = 20
 SETTLE_S = 0.1
 #: How long a `?` may take when a query went unanswered and the state may say why (s).
 STATUS_CHECK_S = 1.0
-#: States in which Grbl answers `?` but parses no line until resumed (or reset).
-SUSPENDED_STATES = frozenset({"Hold", "Door", "Sleep"})
 #: Banners survived during one handshake (see handshake()).
 MAX_RESETS = 2
 #: How long, in all, queries refused with error:8 (the controller busy) are asked again (s).
@@ -58,7 +57,7 @@ BUSY_WAIT_S = 5.0
 #: How often a busy controller's state is asked while waiting for it to rest (s).
 BUSY_POLL_S = 0.1
 #: States in which Grbl answers `$I`, `$$` and `$#` (`system.c:system_execute_line`).
-ANSWERING_STATES = frozenset({"Idle", "Alarm"})
+ANSWERING_STATES = ACCEPTED_IN[LineKind.SYSTEM]
 #: A status report is not made in some states (homing, after a limit alarm: firmware-facts §5.2).
 
 

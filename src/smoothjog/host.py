@@ -64,8 +64,8 @@ from smoothjog.core.responses import (
     VersionInfo,
     parse_response,
 )
+from smoothjog.core.states import REST_STATES, SUSPENDED_STATES
 from smoothjog.handshake import (
-    SUSPENDED_STATES,
     ControllerSuspendedError,
     HandshakeResult,
     read_controller,
@@ -81,9 +81,6 @@ RESUME_POLL_S = 0.25
 #: Longest the re-handshake waits for the engine to see a restarted controller at rest (it
 #: then reads the settings anyway, and the engine's owed cancel follows them as before).
 RESTART_SETTLE_S = 2.0
-
-#: States in which a controller with nothing queued is at rest as far as jogging goes.
-REST_STATES = frozenset({"Idle", "Alarm", "Door", "Hold"})
 
 
 class JogEngine(Protocol):
@@ -266,8 +263,10 @@ class Host:
         self._jog_locks: dict[str, str] = {}
         #: When somebody sent Ctrl-X, until the banner says the controller restarted.
         self._reset_sent_s: float | None = None
-        #: When smoothjog sent Ctrl-X for the user (the console's), until the banner.
-        self._user_reset_s: float | None = None
+        #: Who sent that Ctrl-X (a ledger owner: the console for the user, a proxied sender).
+        self._reset_by: str | None = None
+        #: Whose Ctrl-X the last banner answered (None: nobody's here, an outside reset).
+        self.last_reset_by: str | None = None
         #: The unanswered `$H` line, whoever sent it (the model shows Home until its reply).
         self._homing_entry: Entry | None = None
         self._reply_handlers: dict[str, Callable[[Entry, Ok | ErrorReply, float], None]] = {
@@ -396,14 +395,16 @@ class Host:
         self.link.send_realtime(byte)
         if byte == RESET and self._loop is not None:
             self._reset_sent_s = self._loop.time()
-            if owner == CONSOLE:
-                self._user_reset_s = self._reset_sent_s
+            self._reset_by = owner
 
-    def _user_reset_expected(self, now_s: float) -> bool:
-        """True when a banner now follows a Ctrl-X smoothjog sent for the user (the console's)
-        within RESET_PENDING_S: the reset was asked for, not a fault."""
-        sent_s, self._user_reset_s = self._user_reset_s, None
-        return sent_s is not None and now_s - sent_s <= RESET_PENDING_S
+    def _reset_announced_by(self, now_s: float) -> str | None:
+        """Whose Ctrl-X (within RESET_PENDING_S) a banner now answers, or None: a reset nobody
+        on this host asked for (a reset pin, another program's port, a crash)."""
+        sent_s, by = self._reset_sent_s, self._reset_by
+        self._reset_by = None
+        if sent_s is None or now_s - sent_s > RESET_PENDING_S:
+            return None
+        return by
 
     @property
     def reset_needed(self) -> bool:
@@ -773,13 +774,13 @@ class Host:
     def _on_banner(self, now_s: float) -> None:
         """The controller restarted: its buffers are empty and every line unanswered is lost."""
         self._after_banner = True
+        self.last_reset_by = self._reset_announced_by(now_s)
         self._reset_sent_s = None
         self._homing_entry = None
-        expected = self._user_reset_expected(now_s)
         engine = self.engine
         if engine is not None:
             # Asked for by the user: the engine tells it as news, not as a fault.
-            engine.reset_expected = expected
+            engine.reset_expected = self.last_reset_by == CONSOLE
         dropped = self.ledger.reset()
         if dropped:
             logger.info("the controller reset with %d lines unanswered", len(dropped))

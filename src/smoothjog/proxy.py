@@ -82,8 +82,6 @@ QUIET_S = 0.5
 #: A pty opener may flush its input right after opening (node's serialport does): the banner
 #: goes this long after the open was seen.
 PTY_BANNER_DELAY_S = 0.1
-#: Longest wait for the banner after a sender's Ctrl-X before its later lines go anyway.
-RESET_HOLD_S = 2.0
 #: Longest a waiting forwarder sleeps between looks (lines wake it sooner).
 LOOK_S = 0.02
 #: Most bytes of one unfinished sender line kept (no sender sends more without a line end).
@@ -276,12 +274,10 @@ class SenderProxy:
         self,
         *,
         quiet_s: float = QUIET_S,
-        reset_hold_s: float = RESET_HOLD_S,
         lock_reason: str = JOB_LOCK,
     ) -> None:
         """A proxy with no host yet; attach() one before its start()."""
         self.quiet_s = quiet_s
-        self.reset_hold_s = reset_hold_s
         self.lock_reason = lock_reason
         self.host: Host | None = None
         self.stats = ProxyStats()
@@ -297,8 +293,6 @@ class SenderProxy:
         self._locked = False
         self._quiet_since: float | None = None
         self._quiet_timer: asyncio.TimerHandle | None = None
-        #: When a sender's Ctrl-X went out, until its banner came (its later lines wait).
-        self._reset_sent_s: float | None = None
         self._sessions = 0
 
     # ----------------------------------------------------------------- the session
@@ -374,12 +368,11 @@ class SenderProxy:
         if byte == RESET:
             # The reset empties the controller's buffers: the sender's lines not yet forwarded
             # were in them as far as the sender knows. Lines it sends from now on wait for the
-            # banner, so none lands in the controller while it restarts.
+            # banner (Host.reset_pending), so none lands in the controller while it restarts.
             self._drop_queued()
             for other in self.connections:
                 if other is not conn:  # conn's own line was cut where the byte came
                     other.assembler.clear()
-            self._reset_sent_s = self._now()
         with contextlib.suppress(LinkError):
             host.send_realtime(SENDER, byte)
             self.stats.realtime_sent += 1
@@ -435,7 +428,7 @@ class SenderProxy:
             host = self.host
             # After anybody's Ctrl-X nothing goes until the banner: a line reaching the
             # controller while it restarts would run after the reset, answered to nobody.
-            resetting = host is not None and (host.reset_pending or self._waiting_for_banner())
+            resetting = host is not None and host.reset_pending
             ready = item is not None and host is not None and host.link_error is None
             ready = ready and not resetting
             if item is not None and resetting:
@@ -453,15 +446,6 @@ class SenderProxy:
                 elif host.ledger.fits(item.text):
                     return self._queue.popleft()
             await self._wait_change(look)
-
-    def _waiting_for_banner(self) -> bool:
-        since = self._reset_sent_s
-        if since is None:
-            return False
-        if self._now() - since > self.reset_hold_s:
-            self._reset_sent_s = None  # no banner came: the controller did not reset
-            return False
-        return True
 
     async def _wait_change(self, timeout_s: float | None) -> None:
         changed = self._changed
@@ -516,11 +500,10 @@ class SenderProxy:
         session)."""
         self._banner = raw
         self._banner_since_attach = True
-        if self._reset_sent_s is None:
+        if self.host is None or self.host.last_reset_by != SENDER:
             self._drop_queued()
             for conn in self.connections:
                 conn.assembler.clear()
-        self._reset_sent_s = None
 
     def _broadcast(self, data: bytes) -> None:
         for conn in list(self.connections):
@@ -556,7 +539,7 @@ class SenderProxy:
         settled = (
             not self._motion_in_hand()
             and host.model.state in SETTLED_STATES
-            and not self._waiting_for_banner()
+            and not host.reset_pending
         )
         if not settled:
             self._quiet_since = None
