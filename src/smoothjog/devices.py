@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from smoothjog.authority.arbiter import Arbiter
-from smoothjog.authority.commands import COMMAND_NAMES
+from smoothjog.authority.commands import COMMAND_NAMES, GOTO_SPEED
 from smoothjog.config import DeviceConfig
 from smoothjog.control import ControlRefused, MachineControl
 from smoothjog.core.errors import ConfigError, InputRefused
@@ -47,8 +47,6 @@ log = logging.getLogger(__name__)
 
 #: How often the device list is read again when udev cannot tell us (s).
 RESCAN_S: Final = 1.0
-#: Speed of a device's go-to-zero moves, as the pendant's (fraction of the max feed).
-GOTO_SPEED: Final = 0.5
 
 
 def check_device_configs(configs: Sequence[DeviceConfig]) -> None:

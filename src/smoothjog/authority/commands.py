@@ -17,6 +17,9 @@ LINE_TIMEOUT_S: Final = 30.0
 #: an 800 mm router at 2000 mm/min with room to spare. Its `ok` comes when homing ends.
 HOME_TIMEOUT_S: Final = 120.0
 
+#: "Go to work zero" runs at this fraction of the top jog speed (a page's or a device's).
+GOTO_SPEED: Final = 0.5
+
 #: Re-read after a command: nothing, the parser modes and offsets, or the settings.
 NOTHING, MODES, SETTINGS = "", "modes", "settings"
 
@@ -91,4 +94,12 @@ def command(name: str) -> Command:
     return CATALOGUE[name]
 
 
-__all__ = ["CATALOGUE", "COMMAND_NAMES", "HOME_TIMEOUT_S", "LINE_TIMEOUT_S", "Command", "command"]
+__all__ = [
+    "CATALOGUE",
+    "COMMAND_NAMES",
+    "GOTO_SPEED",
+    "HOME_TIMEOUT_S",
+    "LINE_TIMEOUT_S",
+    "Command",
+    "command",
+]

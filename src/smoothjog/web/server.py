@@ -30,6 +30,7 @@ import segno
 from aiohttp import WSMsgType, web
 
 from smoothjog.authority.arbiter import Arbiter
+from smoothjog.authority.commands import GOTO_SPEED
 from smoothjog.authority.gate import StopRecord
 from smoothjog.config import DEFAULT_HTTP_PORT
 from smoothjog.control import ControlRefused
@@ -68,8 +69,6 @@ SEND_TIMEOUT_S: Final = 1.0
 DEFAULT_AXES: Final = ("X", "Y", "Z")
 #: Step jogs run at this fraction of the top jog speed (fine positioning wants control, not haste).
 STEP_SPEED: Final = 0.5
-#: "Go to work zero" runs at this fraction of the top jog speed.
-GOTO_SPEED: Final = 0.5
 
 _SECURITY_HEADERS: Final = {
     # Everything is served from here; nothing may be framed (click-jacking) or fetched elsewhere.
