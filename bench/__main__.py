@@ -50,6 +50,10 @@ def main() -> int:
         from bench import lead
 
         return lead.main(rest)
+    if name == "memory":
+        from bench import memory
+
+        return memory.main(rest)
     if name == "reset":
         from bench import reset
 

@@ -180,7 +180,7 @@ def link_for(connection: ConnectionConfig) -> Link | None:
 def simulator_link(config: Config) -> Link:
     """A link to the built-in simulator, with the config's [sim] firmware and machine."""
     profile = get_firmware_profile(config.sim.firmware)
-    return SimLink(GrblFirmware(profile, config.sim.machine))
+    return SimLink(GrblFirmware(profile, config.sim.machine, keep_trace=False))
 
 
 def open_link(args: argparse.Namespace) -> Link | None:

@@ -133,7 +133,8 @@ def prepare_session(args: argparse.Namespace) -> PreparedSession:
     if link is None:
         firmware = args.firmware or config.sim.firmware
         machine = args.machine or config.sim.machine
-        link = SimLink(GrblFirmware(get_firmware_profile(firmware), machine))
+        # The embedded default runs all day: it keeps no ground-truth trace.
+        link = SimLink(GrblFirmware(get_firmware_profile(firmware), machine, keep_trace=False))
         print(
             f"smoothjog: no controller given: using the built-in simulator ({firmware}, {machine})"
         )

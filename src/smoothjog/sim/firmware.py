@@ -276,9 +276,10 @@ class GrblFirmware:
         eeprom: Eeprom | None = None,
         on_eeprom_write: Callable[[Eeprom], None] | None = None,
         now_s: float = 0.0,
+        keep_trace: bool = True,
     ) -> None:
         """Power the controller up at now_s: banner, then Idle or Alarm (firmware-facts §2,
-        §5.3)."""
+        §5.3). keep_trace False keeps no ground-truth segments (a machine that runs all day)."""
         if machine is None:
             machine = "grbl-defaults"
         if isinstance(machine, str):
@@ -305,6 +306,7 @@ class GrblFirmware:
             junction_deviation_mm=self.settings[11],
             planner_blocks=firmware.facts.planner_usable_blocks,
         )
+        self.motion.keep_trace = keep_trace
         self.parser = ParserState.initial(
             self.n_axes, coord_systems_mm=coords, g28_mm=g28, g30_mm=g30
         )

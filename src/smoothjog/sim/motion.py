@@ -163,7 +163,10 @@ class Motion:
         # The executing segment started at this time; _now_s is the last time advanced to.
         self._exec_start_s = 0.0
         self._now_s = 0.0
+        #: Every segment executed, in order: the ground truth, while keep_trace is True. The
+        #: embedded default machine turns it off (a day of jogging would fill memory with it).
         self.trace: list[TraceSegment] = []
+        self.keep_trace = True
 
     # ----------------------------------------------------------------- configuration
     def reconfigure(self, axes: Sequence[AxisLimits], junction_deviation_mm: float) -> None:
@@ -444,7 +447,8 @@ class Motion:
             d1 = seg.d1_mm
             self._machine_steps = self._steps_in_block(block, d1)
             end_mm = tuple([s + u * d1 for s, u in zip(start, unit, strict=True)])
-        self.trace.append(TraceSegment(self._exec_start_s, end_s, start_mm, end_mm))
+        if self.keep_trace:
+            self.trace.append(TraceSegment(self._exec_start_s, end_s, start_mm, end_mm))
 
     # ----------------------------------------------------------------- step preparer
     def starve(self) -> None:

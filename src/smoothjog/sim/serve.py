@@ -149,7 +149,11 @@ def build_firmware(opts: ServeOptions) -> GrblFirmware:
         save_eeprom(path, image)
 
     return GrblFirmware(
-        profile, machine, eeprom=eeprom, on_eeprom_write=persist if path is not None else None
+        profile,
+        machine,
+        eeprom=eeprom,
+        on_eeprom_write=persist if path is not None else None,
+        keep_trace=opts.trace_path is not None,
     )
 
 
