@@ -795,3 +795,12 @@ def test_a_dead_man_stop_names_the_dead_man(rig: Rig) -> None:
     stop = rig.sink.intents[-1]
     assert isinstance(stop, StopIntent)
     assert stop.by.startswith("the dead-man (nothing heard from pad for ")
+
+
+def test_the_holders_stop_button_is_a_stop_every_page_hears(rig: Rig) -> None:
+    _, pad_h = rig.attach("pad")
+    pad_h.submit(JOG)
+    pad_h.submit(StopIntent(button=True))
+    stop = rig.sink.intents[-1]
+    assert isinstance(stop, StopIntent)
+    assert (stop.by, stop.release) == ("gamepad pad", False)

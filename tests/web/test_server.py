@@ -564,3 +564,28 @@ async def test_a_device_announcement_reaches_every_page(
         }
     await first.close()
     await second.close()
+
+
+async def test_the_controllers_own_stop_is_told_but_its_release_is_not(
+    pendant: StartPendant, http: aiohttp.ClientSession
+) -> None:
+    p = await pendant()
+    backend: RecordingBackend = p.backend
+    first = await open_ws(http, p)
+    await until_role(first, "controller")
+    second = await open_ws(http, p)
+    await until_role(second, "watcher")
+    # A release is a neutral jog: the machine stops, nobody is told.
+    await send(first, JOG_X)
+    await send(first, {"type": "jog", "axes": {"X": 0, "Y": 0, "Z": 0}, "speed": 0.5})
+    await backend.wait_for(lambda: backend.named("stop"), what="the release")
+    # STOP pressed on the page that holds the jog: every page is told who stopped it.
+    await send(first, JOG_X)
+    await backend.wait_for(lambda: len(backend.named("jog_continuous")) == 2, what="the jog")
+    await send(first, {"type": "stop"})
+    for ws in (first, second):
+        told = await next_message(ws, "error", stops=True)
+        assert told["text"] == "stopped by pendant #1 127.0.0.1: the jog was cancelled"
+    # Exactly one stop was told: the release before it was none.
+    assert sum(1 for c in backend.calls if c.name == "stop") == 2
+    assert [i for i in backend.intents if isinstance(i, StopIntent)] == [StopIntent()]

@@ -274,7 +274,7 @@ class Arbiter:
         if isinstance(intent, StopIntent) and not handle.detached:
             self._tripped.pop(handle, None)
             by = intent.by or _describe(handle)
-            letting_go = handle is self._controller and self._holding
+            letting_go = handle is self._controller and self._holding and not intent.button
             self._latch_holder(handle, by)
             self._release()
             self._forward(StopIntent(by, release=letting_go))

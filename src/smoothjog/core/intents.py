@@ -53,11 +53,13 @@ class GotoIntent:
 class StopIntent:
     """Stop now (full cancel handshake) and drop any steps not yet sent.
 
-    by names who stopped, in words, for every page to see; release says it is the holder of a
-    held jog letting go of it (nothing to announce). Neither plays a part in equality.
+    by names who stopped, in words, for every page to see; button says a STOP button or key
+    gave it (always news, even from the input holding the jog); release says it is the holder
+    of a held jog letting go of it (nothing to announce). None plays a part in equality.
     """
 
     by: str = field(default="", compare=False)
+    button: bool = field(default=False, compare=False)
     release: bool = field(default=False, compare=False)
 
 

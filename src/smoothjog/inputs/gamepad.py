@@ -487,7 +487,7 @@ class GamepadDecoder(Decoder):
             self._armed = False
         if action == "stop":
             self._last, self._step_held = None, False  # the StopIntent ends the jog
-            return [StopIntent()]
+            return [StopIntent(button=True)]
         if action == "zero":
             return [DeviceCommand("zero", axes=self.axes)]
         return [DeviceCommand(action)]

@@ -391,7 +391,7 @@ class KeyboardDecoder(Decoder):
         if control == "stop":
             self._forget_keys()
             self._sent = self._neutral()  # the stop ends the jog; no neutral after it
-            return [StopIntent()]
+            return [StopIntent(button=True)]
         if control == "step":
             # Keys held across the switch would start the other mode's motion by themselves.
             self._forget_keys()

@@ -308,7 +308,8 @@ class _Shuttle(Decoder):
             if not fire:
                 continue
             if button.kind == "stop":
-                out.extend(self._moving_stop() or [StopIntent()])
+                self._moving_stop()  # forget the motion; the button's stop is always sent
+                out.append(StopIntent(button=True))
                 self._selected = None
                 stopped = True
             elif button.kind == "step":

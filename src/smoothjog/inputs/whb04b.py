@@ -416,7 +416,7 @@ class Whb04bDecoder(Decoder):
             self._explained, drop = None, True
         for key in presses:
             if key == KEY_STOP:
-                actions += [StopIntent()]
+                actions += [StopIntent(button=True)]
                 self._motion, drop = False, True
             elif key in KEY_NAMES:
                 actions += self._command(self.buttons[("fn_" if fn else "") + KEY_NAMES[key]])
@@ -459,7 +459,7 @@ class Whb04bDecoder(Decoder):
             return []
         if action == "stop":
             self._motion = False
-            return [StopIntent()]
+            return [StopIntent(button=True)]
         if action == "hold_resume":
             return [DeviceCommand(self._hold_or_resume())]
         if action == "zero_all":

@@ -390,9 +390,26 @@ class Motion:
         )
 
     def kill(self) -> None:
-        """Stop at once (soft reset): everything queued is lost; the position is kept."""
+        """Stop at once (soft reset): everything queued is lost; the position is kept, and the
+        part of the executing segment already run goes into the trace."""
+        self._trace_partial_segment()
         self._machine_steps = self.position_steps()
         self.clear_after_stop()
+
+    def _trace_partial_segment(self) -> None:
+        """The executing segment up to now, as the trace's last segment (a reset cut it)."""
+        if not (self.keep_trace and self._running and self._segments):
+            return
+        seg = self._segments[0]
+        if self._now_s <= self._exec_start_s or seg.dt_s <= 0:
+            return
+        frac = min((self._now_s - self._exec_start_s) / seg.dt_s, 1.0)
+        block = seg.block
+        start, unit = block.start_mm, block.unit_vec
+        d1 = seg.d0_mm + (seg.d1_mm - seg.d0_mm) * frac
+        start_mm = tuple([s + u * seg.d0_mm for s, u in zip(start, unit, strict=True)])
+        end_mm = tuple([s + u * d1 for s, u in zip(start, unit, strict=True)])
+        self.trace.append(TraceSegment(self._exec_start_s, self._now_s, start_mm, end_mm))
 
     def set_position_steps(self, steps: Sequence[int]) -> None:
         """Set machine and planner step counters (homing sets sys_position); only while idle."""

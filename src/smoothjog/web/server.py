@@ -270,7 +270,7 @@ class PendantHub:
         if isinstance(message, StopMessage) and not handle.in_control:
             # Any page's STOP stops the machine (the arbiter lets a stop through from anyone).
             with contextlib.suppress(InputRefused):
-                handle.submit(StopIntent())
+                handle.submit(StopIntent(button=True))
             return
         if not handle.in_control:
             await self.refuse(
@@ -416,7 +416,8 @@ def _intent_of(message: JogMessage | StopMessage | StepMessage) -> Intent:
         return ContinuousIntent(dict(message.axes), message.speed)
     if isinstance(message, StepMessage):
         return StepIntent(message.axis, message.dist_mm, STEP_SPEED)
-    return StopIntent()
+    # The page sends `stop` for its STOP button and Escape (a release is a neutral jog).
+    return StopIntent(button=True)
 
 
 _background: set[asyncio.Task[None]] = set()

@@ -118,10 +118,13 @@ function beat() {
   const now = performance.now();
   const silentMs = now - lastAliveAt;
   if (silentMs > gateMs) {
-    // The page's own thread is frozen: stop now rather than hold its jog for it.
+    // The page's own thread is frozen: stop now rather than hold its jog for it. A neutral jog
+    // ends it as a release does (`stop` is the STOP button's, told to every page).
+    const axes = Object.fromEntries(Object.keys(held.axes || {}).map((a) => [a, 0]));
+    const speed = held.speed;
     held = null;
     frozen = true;
-    raw({ type: "stop" });
+    raw({ type: "jog", axes, speed });
     post({ ev: "frozen", silentMs });
     return;
   }

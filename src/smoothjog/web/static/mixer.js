@@ -1,11 +1,11 @@
 // The jog mixer: sums every input's deflection into one intent and owns the heartbeat and stop.
 //
 // Each input (XY stick, Z stick, keys, gamepad) sets its own contribution; the mixer sends a jog
-// when the sum changes and one stop the moment the sum returns to zero. The link worker repeats
-// the held jog as the heartbeat (linkworker.js). After a trip (the server's dead-man, the
-// worker's stop for a frozen page, a stop from any page) nothing moves until every input is
-// released: a jog never restarts by itself under the user's finger. A stop is never blocked:
-// stopAll() sends one whether or not this page may jog.
+// when the sum changes and a neutral jog the moment the sum returns to zero (`stop` is for STOP
+// and Escape). The link worker repeats the held jog as the heartbeat (linkworker.js). After a
+// trip (the server's dead-man, the worker's stop for a frozen page, a stop from any page)
+// nothing moves until every input is released: a jog never restarts by itself under the user's
+// finger. A stop is never blocked: stopAll() sends one whether or not this page may jog.
 
 import { clamp, round3 } from "./shaping.js";
 
@@ -121,8 +121,7 @@ export class JogMixer {
       // Released after a trip: this tells the server and the worker it is over.
       this.tripped = false;
       if (this.releaseWith === "neutral") {
-        const axes = Object.fromEntries(this.axes.map((a) => [a, 0]));
-        this.send({ type: "jog", axes, speed: round3(this.speed) });
+        this._sendNeutral();
       } else {
         this.send({ type: "stop" });
       }
@@ -130,10 +129,12 @@ export class JogMixer {
     }
     if (!moving) {
       if (this.active) {
+        // A release is a neutral jog: `stop` is kept for STOP and Escape, which every page is
+        // told of even when they come from the page holding the jog.
         this.active = false;
         this.last = null;
         this._cancelTimer();
-        this.send({ type: "stop" });
+        this._sendNeutral();
         this.onActivity(false);
       }
       return;
@@ -149,6 +150,11 @@ export class JogMixer {
       if (wait <= 0) this._sendJog();
       else this._arm(wait);
     }
+  }
+
+  _sendNeutral() {
+    const axes = Object.fromEntries(this.axes.map((a) => [a, 0]));
+    this.send({ type: "jog", axes, speed: round3(this.speed) });
   }
 
   _sendJog() {

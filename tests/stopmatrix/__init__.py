@@ -1,0 +1,1 @@
+"""The STOP matrix: every stop source against every kind of motion, on the served simulator."""
