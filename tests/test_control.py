@@ -8,6 +8,7 @@ from typing import TypeVar
 
 import pytest
 
+from smoothjog.authority.gate import RESET_NEEDED_TEXT
 from smoothjog.control import CommandResult, ControlRefused, MachineControl
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent
 from smoothjog.core.ledger import CONSOLE
@@ -317,9 +318,7 @@ def test_reset_right_after_a_limit_alarm_restarts_the_controller(vh: VirtualHost
     assert vh.now_s - started_s < 1.0
     assert vh.host.reset_needed
     assert c.gate.command_refusal("reset") is None
-    assert c.gate.command_refusal("unlock") == (
-        "the controller stopped at a critical alarm and reads nothing until it is reset: press Reset"
-    )
+    assert c.gate.command_refusal("unlock") == RESET_NEEDED_TEXT
     resets = vh.model.reset_count
     assert run(vh, c.soft_reset()).ok
     assert vh.model.reset_count >= resets + 1

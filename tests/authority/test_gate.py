@@ -297,3 +297,24 @@ def test_a_console_line_is_judged_on_a_fresh_report(session: Session) -> None:
     with pytest.raises(ControlRefused, match="the machine is moving"):
         run(vh, session.control.console("$$"))
     assert not [r for _, r in vh.received if isinstance(r, ErrorReply)]
+
+
+def test_the_state_shown_is_smoothjogs_own_when_the_link_is_lost(session: Session) -> None:
+    from smoothjog.core.errors import LinkError
+    from smoothjog.web.session_backend import SessionBackend
+
+    backend = SessionBackend(session.vh.host, control=session.control)
+    assert backend.view()["state"] == "Idle"
+    assert backend.view()["link"] == "up"
+    session.vh.host.link_error = LinkError("/dev/ttyUSB0 was unplugged")
+    view = backend.view()
+    assert (view["state"], view["link"], view["can_jog"]) == ("Lost", "lost", False)
+    assert view["reason"] == "the connection to the controller is lost"
+    assert view["fault"] == {
+        "text": "/dev/ttyUSB0 was unplugged",
+        "hint": "check the cable and restart",
+    }
+    control = view["control"]
+    assert isinstance(control, dict)
+    assert set(control["commands"].values()) == {"the connection to the controller is lost"}
+    session.vh.host.link_error = None
