@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Awaitable, Iterator
+from collections.abc import Iterator
 from typing import TypeVar
 
 import pytest
@@ -14,38 +13,26 @@ from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent
 from smoothjog.core.ledger import CONSOLE
 from smoothjog.core.responses import ErrorReply
 from smoothjog.sim.firmware import GrblFirmware
-from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
 from smoothjog.sim.rig import SimRig
 from smoothjog.virtual import VirtualHost
 from smoothjog.web.protocol import CommandMessage
+from tests.hobby import hobby_router, run
 
 T = TypeVar("T")
 
 
-def _vhost(start: str = "homed", firmware: str = "grbl") -> VirtualHost:
-    machine = dataclasses.replace(load_machine_profile("hobby-router"), start=start)
-    rig = SimRig(GrblFirmware(get_firmware_profile(firmware), machine))
-    vh = VirtualHost(rig)
-    vh.handshake()
-    return vh
-
-
 @pytest.fixture
 def vh() -> Iterator[VirtualHost]:
-    host = _vhost()
+    host = hobby_router()
     yield host
     host.close()
 
 
 @pytest.fixture
 def alarmed() -> Iterator[VirtualHost]:
-    host = _vhost("power-up")
+    host = hobby_router("power-up")
     yield host
     host.close()
-
-
-def run(vh: VirtualHost, aw: Awaitable[T]) -> T:
-    return vh._run(aw)
 
 
 def control(vh: VirtualHost) -> MachineControl:

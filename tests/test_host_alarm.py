@@ -7,8 +7,7 @@ news, not a fault; an alarm's fault goes once the controller leaves Alarm.
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Awaitable, Iterator
+from collections.abc import Iterator
 from typing import TypeVar
 
 import pytest
@@ -18,10 +17,8 @@ from smoothjog.core.machine import MachineModel
 from smoothjog.core.realtime import RESET
 from smoothjog.core.responses import AlarmReply, Banner, ErrorReply, Ok
 from smoothjog.host import ResetNeededError
-from smoothjog.sim.firmware import GrblFirmware
-from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
-from smoothjog.sim.rig import SimRig
 from smoothjog.virtual import VirtualHost
+from tests.hobby import hobby_router, run
 
 T = TypeVar("T")
 
@@ -34,9 +31,7 @@ SOFT_LIMIT_TEXT = (
 
 
 def _vhost(start: str = "homed") -> VirtualHost:
-    machine = dataclasses.replace(load_machine_profile("hobby-router"), start=start)
-    vh = VirtualHost(SimRig(GrblFirmware(get_firmware_profile("grbl"), machine)))
-    vh.handshake()
+    vh = hobby_router(start)
     vh.run_until(vh.now_s + 0.3)
     return vh
 
@@ -46,10 +41,6 @@ def vh() -> Iterator[VirtualHost]:
     host = _vhost()
     yield host
     host.close()
-
-
-def run(vh: VirtualHost, aw: Awaitable[T]) -> T:
-    return vh._run(aw)
 
 
 def console(vh: VirtualHost, line: str, timeout_s: float = 30.0) -> Ok | ErrorReply:

@@ -7,8 +7,7 @@ a jog held elsewhere until that input lets go.
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Awaitable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -23,10 +22,8 @@ from smoothjog.core.jogger import JogTuning
 from smoothjog.core.ledger import CONSOLE, foreign
 from smoothjog.core.responses import ErrorReply
 from smoothjog.inputs.base import Input, InputHandle, Notice
-from smoothjog.sim.firmware import GrblFirmware
-from smoothjog.sim.profiles import get_firmware_profile, load_machine_profile
-from smoothjog.sim.rig import SimRig
 from smoothjog.virtual import VirtualHost
+from tests.hobby import hobby_router, run
 
 T = TypeVar("T")
 
@@ -37,22 +34,11 @@ NEUTRAL = ContinuousIntent({"X": 0.0}, 1.0)
 STOP_BOUND_MM = (5000 / 60) ** 2 / (2 * 500) + 5000 / 60 * JogTuning().poll_moving_s
 
 
-def _vhost(start: str = "homed") -> VirtualHost:
-    machine = dataclasses.replace(load_machine_profile("hobby-router"), start=start)
-    vh = VirtualHost(SimRig(GrblFirmware(get_firmware_profile("grbl"), machine)))
-    vh.handshake()
-    return vh
-
-
 @pytest.fixture
 def vh() -> Iterator[VirtualHost]:
-    host = _vhost()
+    host = hobby_router()
     yield host
     host.close()
-
-
-def run(vh: VirtualHost, aw: Awaitable[T]) -> T:
-    return vh._run(aw)
 
 
 def stop(vh: VirtualHost, gate: MotionGate, by: str) -> StopRecord:
@@ -189,7 +175,7 @@ def test_stop_feed_holds_a_console_move_the_last_report_does_not_show_yet(
 
 
 def test_stop_during_homing_resets_and_says_so() -> None:
-    vh = _vhost("power-up")
+    vh = hobby_router("power-up")
     try:
         control = MachineControl(vh.host)
         task = vh.loop.create_task(control.home())

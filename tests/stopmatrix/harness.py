@@ -65,16 +65,6 @@ HOPS_S: Final = 0.1
 REST_MM: Final = 0.01
 #: The simulator's longest motion segment (s): Grbl's 10 ms (ACCELERATION_TICKS_PER_SECOND).
 SEGMENT_S: Final = 0.01
-CHROMIUM: Final = "/usr/bin/chromium"
-CHROMIUM_ARGS: Final = (
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-)
 DESKTOP: Final = {"width": 1280, "height": 900}
 
 
@@ -619,8 +609,6 @@ class MachineOps:
 
 
 __all__ = [
-    "CHROMIUM",
-    "CHROMIUM_ARGS",
     "DESKTOP",
     "INIT_SCRIPT",
     "MOVING_SELECTOR",

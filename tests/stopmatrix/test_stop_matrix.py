@@ -31,8 +31,9 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
-from tests.stopmatrix.harness import CHROMIUM, CHROMIUM_ARGS, write_machine
+from tests.stopmatrix.harness import write_machine
 from tests.stopmatrix.matrix import CELLS, Cell, Verdict, order, run_lanes, table
+from tests.web.conftest import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [
     pytest.mark.timeout(600),

@@ -695,7 +695,8 @@ SAMPLES: dict[str, Any] = {
     "gate._state_refusal.state": _GRBL_STATES,
     "gate._stop_text.by": _stop_bys,
     "gate.set_intent.intent": [StopIntent()],
-    "states.line_refusal.state": _GRBL_STATES,
+    "states.state_refusal.state": _GRBL_STATES,
+    "states.state_refusal.what": ["line", "command"],
     # The arbiter and the server.
     "arbiter.handle": _all_handles,
     "arbiter._detached_text.handle": lambda: [*_handles()[:-1], *_device_handles()],
@@ -1046,7 +1047,8 @@ def other_sites() -> list[Site]:
         # The motion gate: why a jog, a command or a line waits, and who stopped what.
         *_sites(GATE, _constants(r"[A-Z_]+_TEXT")),
         *[site for method in GATE_TEXTS for site in _sites(GATE, _returns(method))],
-        *_sites("core/states.py", _returns("line_refusal")),
+        *_sites("core/states.py", _returns("state_refusal")),
+        *_sites("core/states.py", _constants(r"[A-Z_]+_TEXT")),
         # Each command's `doing`: control.running, and "jogging waits: homing is running".
         *_sites("authority/commands.py", _calls("Command", 1)),
         *_sites("control.py", _calls("ControlRefused", 0)),
@@ -1152,7 +1154,7 @@ def test_the_gate_arbiter_and_host_texts_are_found() -> None:
     assert sorted(doing) == sorted(_running())
     assert len(_sites("host.py", _calls("__init__", 0), only=("__init__",))) == 1
     assert method_returns("host.py", "_settings_unread_reason")
-    assert method_returns("core/states.py", "line_refusal")
+    assert method_returns("core/states.py", "state_refusal")
 
 
 def test_every_sentence_the_page_shows_has_a_pattern() -> None:

@@ -33,13 +33,13 @@ from smoothjog.core.responses import StatusReport
 from smoothjog.core.states import (
     LINK_LOST,
     MOVING_STATES,
+    MOVING_TEXT,
     READING_SETTINGS,
     SETTLED_STATES,
-    SLEEP_TEXT,
-    SUSPENDED_STATES,
     LineKind,
     line_kind,
     line_refusal,
+    state_refusal,
 )
 from smoothjog.core.states import moves as line_moves
 from smoothjog.host import Host
@@ -55,8 +55,6 @@ REREADING_TEXT: Final = "the controller restarted: wait while smoothjog reads it
 RESET_NEEDED_TEXT: Final = (
     "the controller stopped at a critical alarm and reads nothing until it is reset: press Reset"
 )
-#: Why a command waits for motion to end.
-MOVING_TEXT: Final = "the machine is moving: press STOP and wait until it stands still"
 #: A report this long after a motion line's `ok` shows whether that line started the machine
 #: (a report asked just before the line ran can still say Idle).
 SETTLE_MARGIN_S: Final = 0.1
@@ -324,13 +322,7 @@ def _state_refusal(name: str, state: str) -> str:
         return f"nothing to resume: the machine is in {state}, not in Hold"
     if name == "hold":
         return f"nothing to hold: the machine is in {state}, not running"
-    if state == "Sleep":
-        return SLEEP_TEXT
-    if state in SUSPENDED_STATES:
-        return f"the controller is in {state}: resume (~) or reset it first"
-    if state == "Alarm":
-        return "the controller is in Alarm: unlock ($X) or home ($H) first, or reset it"
-    return f"the controller does not take this command in {state}"
+    return state_refusal(state, "command")
 
 
 def _stop_text(by: str, actions: list[str]) -> str:

@@ -21,6 +21,8 @@ REST_STATES: Final = frozenset({"Idle", "Alarm", "Door", "Hold"})
 #: States in which a program's motion is over (or never ran).
 SETTLED_STATES: Final = frozenset({"Idle", "Alarm", "Check", "Sleep"})
 
+#: Why nothing but a stop goes while the machine moves.
+MOVING_TEXT: Final = "the machine is moving: press STOP and wait until it stands still"
 #: Sleep ends only with a reset.
 SLEEP_TEXT: Final = "the controller is asleep: reset it to wake it"
 
@@ -97,24 +99,29 @@ def line_refusal(text: str, state: str | None) -> str | None:
     """Why the controller would not act on this line in this state, in words; None if it would."""
     if state is None:
         return None  # nothing known yet: the controller's own reply will say
-    kind = line_kind(text)
-    if state in ACCEPTED_IN[kind]:
+    if state in ACCEPTED_IN[line_kind(text)]:
         return None
+    return state_refusal(state, "line")
+
+
+def state_refusal(state: str, what: str) -> str:
+    """Why the controller does not take a line or command (what) in this state, in words."""
     if state in MOVING_STATES:
-        return "the machine is moving: press STOP and wait until it stands still"
+        return MOVING_TEXT
     if state == "Sleep":
         return SLEEP_TEXT
     if state in SUSPENDED_STATES:
         return f"the controller is in {state} and reads no line: resume (~) or reset it first"
     if state == "Alarm":
         return "the controller is in Alarm: unlock ($X) or home ($H) first, or reset it"
-    return f"the controller does not take this line in {state}"
+    return f"the controller does not take this {what} in {state}"
 
 
 __all__ = [
     "ACCEPTED_IN",
     "LINK_LOST",
     "MOVING_STATES",
+    "MOVING_TEXT",
     "READING_SETTINGS",
     "REST_STATES",
     "SETTLED_STATES",
@@ -124,4 +131,5 @@ __all__ = [
     "line_kind",
     "line_refusal",
     "moves",
+    "state_refusal",
 ]

@@ -411,7 +411,6 @@ const SERVER_ZH = [
   [/^the controller stopped at a critical alarm and reads nothing until it is reset: press Reset$/, "控制器因严重报警而停止，复位前不读取任何指令：请按“复位”"],
   [/^the controller is in Alarm: unlock \(\$X\) or home \(\$H\) first, or reset it$/, "控制器处于报警状态：请先解锁（$X）或回零（$H），或将其复位"],
   [/^the controller is in (\w+) and reads no line: resume \(~\) or reset it first$/, "控制器处于{1}状态，不读取任何指令：请先继续（~）或复位"],
-  [/^the controller is in (\w+): resume \(~\) or reset it first$/, "控制器处于{1}状态：请先继续（~）或复位"],
   [/^the controller does not take this command in (\w+)$/, "控制器在{1}状态下不接受此命令"],
   [/^the controller does not take this line in (\w+)$/, "控制器在{1}状态下不接受这一行"],
   [/^nothing to hold: the machine is in (\w+), not running$/, "没有可暂停的运动：机器当前为{1}，并未在运行"],
