@@ -481,7 +481,7 @@ def _critical_alarms() -> list[int]:
 
 
 def _pin_names() -> list[str]:
-    from smoothjog.core.jogger import _PIN_NAMES
+    from smoothjog.core.engine.reports import PIN_NAMES as _PIN_NAMES
 
     pins = [_PIN_NAMES[p] for p in "HD"]
     return [*pins, " and ".join(pins)]
@@ -510,7 +510,7 @@ def _room_stoppers() -> list[str]:
 
 
 def _where_blocked(start: tuple[float, ...]) -> str:
-    from smoothjog.core.jogger import Jogger
+    from smoothjog.core.engine import Jogger
 
     return Jogger._where_blocked(_FAKE_LIMITS, start)  # type: ignore[arg-type]
 
