@@ -58,9 +58,9 @@ from bench.cpu import _sigterm_as_interrupt
 from bench.links import cli_tuning, code_version
 from smoothjog.cli.common import link_for
 from smoothjog.config import Config
+from smoothjog.core.engine import Jogger
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.intents import ContinuousIntent
-from smoothjog.core.jogger import Jogger
 from smoothjog.host import Host
 from smoothjog.links.base import Link
 from smoothjog.sim.firmware import GrblFirmware

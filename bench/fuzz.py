@@ -28,15 +28,15 @@ import time
 from dataclasses import dataclass, field
 
 from bench import measure
+from smoothjog.core.engine import EngineEvent, Jogger, Output, Phase
+from smoothjog.core.engine.stopper import StopPhase
+from smoothjog.core.engine.tracker import PathSeg
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineEvent, Jogger, Output, Phase
 from smoothjog.core.ledger import ENGINE
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.realtime import JOG_CANCEL
 from smoothjog.core.responses import GcodeModes
-from smoothjog.core.stopper import StopPhase
-from smoothjog.core.tracker import PathSeg
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.motion import TraceSegment
 from smoothjog.sim.profiles import get_firmware_profile
@@ -209,7 +209,7 @@ class _Session:
         self.own_cancels_s: list[float] = []
         #: When the engine wrote each of its own jog lines.
         self.own_jogs_s: list[float] = []
-        engine_send = engine._send
+        engine_send = engine.lines.send
 
         def send(
             line: str, kind: str, now_s: float, out: list[Output], seg: PathSeg | None = None
@@ -218,7 +218,7 @@ class _Session:
                 self.own_jogs_s.append(now_s)
             engine_send(line, kind, now_s, out, seg)
 
-        engine._send = send  # type: ignore[method-assign]
+        engine.lines.send = send  # type: ignore[method-assign]
         host = self.vs.host
         host_send_realtime = host.send_realtime
 
@@ -550,23 +550,23 @@ def _fmt(p: tuple[float, ...]) -> str:
 
 def _path_end(engine: Jogger) -> tuple[float, ...] | None:
     """Where everything the engine has sent ends (None without a path)."""
-    track = engine._track
+    track = engine.track
     return track.end_mm if track.path else None
 
 
 def _own_cancel_due(engine: Jogger) -> bool:
     """True while the engine's own stop waits for a line's ok before the 0x85 it will send."""
-    stop = engine._stop
+    stop = engine.stopping.handshake
     return (
         engine.phase is Phase.STOPPING
         and stop.phase is StopPhase.WAIT_ACKS
-        and bool(engine._track.path)
+        and bool(engine.track.path)
     )
 
 
 def _own_cancel_sent(engine: Jogger) -> bool:
     """True while the engine's own stop has sent its 0x85 and waits for the sync line."""
-    stop = engine._stop
+    stop = engine.stopping.handshake
     return engine.phase is Phase.STOPPING and stop.phase is StopPhase.WAIT_SYNC and stop.cancelled
 
 

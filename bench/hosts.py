@@ -21,8 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from smoothjog.core.engine import EngineLimits, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.intents import ContinuousIntent, Intent
-from smoothjog.core.jogger import EngineLimits, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.jogline import build_jog_line
 from smoothjog.core.ledger import ENGINE, Entry, Ledger
 from smoothjog.core.machine import MachineModel

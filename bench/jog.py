@@ -18,7 +18,7 @@ from pathlib import Path
 
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, Method, Shipped
-from smoothjog.core.jogger import Jogger
+from smoothjog.core.engine import Jogger
 
 Factory = Method
 

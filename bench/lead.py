@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from bench import links
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, Shipped
-from smoothjog.core.jogger import JogTuning
+from smoothjog.core.engine import JogTuning
 from smoothjog.sim.rig import LINK_MODELS
 
 #: The links whose targets the engine misses by the least: the bridge's S1 and CH340's S4.

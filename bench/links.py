@@ -18,7 +18,7 @@ from pathlib import Path
 from bench import scenarios as sc
 from bench.hosts import REFERENCE_FACTORIES, Method, Shipped
 from smoothjog.config import Config
-from smoothjog.core.jogger import Jogger, JogTuning
+from smoothjog.core.engine import Jogger, JogTuning
 from smoothjog.sim.rig import LINK_MODELS, LinkModel
 
 LONG_JOG = "one long jog + 0x85"

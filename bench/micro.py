@@ -6,8 +6,8 @@ import math
 import statistics
 import time
 
+from smoothjog.core.engine import EngineLimits, Jogger, Output
 from smoothjog.core.intents import ContinuousIntent, Intent
-from smoothjog.core.jogger import EngineLimits, Jogger, Output
 from smoothjog.core.ledger import Ledger
 from smoothjog.core.machine import MachineModel
 from smoothjog.sim.firmware import GrblFirmware

@@ -149,7 +149,7 @@ def test_the_floor_sends_what_the_engine_would() -> None:
     # imports nothing of smoothjog): both must stay what the engine does.
     from bench import cpu_floor
 
-    from smoothjog.core.jogger import JogTuning
+    from smoothjog.core.engine import JogTuning
     from smoothjog.core.jogline import build_jog_line
 
     engine = JogTuning()

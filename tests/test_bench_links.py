@@ -8,7 +8,7 @@ from bench import scenarios as sc
 from bench.hosts import Shipped
 
 from smoothjog.config import Config
-from smoothjog.core.jogger import JogTuning
+from smoothjog.core.engine import JogTuning
 from smoothjog.sim.rig import LINK_MODELS
 
 

@@ -7,9 +7,9 @@ import math
 
 import pytest
 
+from smoothjog.core.engine import JogTuning, Phase, SendLine
 from smoothjog.core.errors import JogBuildError
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, StepIntent, StopIntent
-from smoothjog.core.jogger import JogTuning, Phase, SendLine
 from smoothjog.core.machine import KeepOut
 from smoothjog.core.responses import ErrorReply, GcodeModes
 from smoothjog.sim.firmware import GrblFirmware

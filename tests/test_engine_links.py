@@ -153,7 +153,7 @@ def test_on_an_ftdi_link_the_queue_holds_what_a_line_needs_to_arrive_not_the_rou
     vs.run_until(vs.now_s + 2.0)  # the split needs a cruise's reports first
     queued, lowest = _cruise(vs, 2.0)
     assert vs.engine is not None
-    assert vs.engine._rtt_hi_s > 0.015
+    assert vs.engine.clock.rtt_hi_s > 0.015
     # Sized for the round trip, the queue ran 12.8-13.6 ms beyond them on average (seeds 0-2);
     # sized by the split, 7.9-8.4 ms (half of it the sawtooth of one 10.5 ms block).
     mean_lead_s = (sum(queued) / len(queued) - STOP_MM) / V_MM_S - COMMITTED_S

@@ -12,8 +12,8 @@ import math
 
 import pytest
 
+from smoothjog.core.engine import EngineEvent
 from smoothjog.core.intents import ContinuousIntent
-from smoothjog.core.jogger import EngineEvent
 from smoothjog.sim.firmware import GrblFirmware
 from smoothjog.sim.rig import LinkModel, SimRig
 from smoothjog.virtual import VirtualHost

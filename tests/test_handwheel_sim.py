@@ -12,8 +12,8 @@ from collections.abc import Sequence
 from typing import Literal
 
 from smoothjog.core import increments as inc
+from smoothjog.core.engine import JogTuning
 from smoothjog.core.intents import HandwheelIntent
-from smoothjog.core.jogger import JogTuning
 from smoothjog.sim.motion import TraceSegment
 from smoothjog.virtual import VirtualHost
 from tests.test_engine import sent_lines

@@ -9,9 +9,9 @@ from collections.abc import AsyncIterator, Callable, Mapping
 
 import pytest
 
+from smoothjog.core.engine import EngineEvent
 from smoothjog.core.errors import LinkError
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineEvent
 from smoothjog.core.responses import Banner
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink

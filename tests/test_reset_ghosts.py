@@ -80,7 +80,7 @@ def test_a_restarted_controller_never_seen_at_rest_is_read_again_after_the_time_
     """The wait before the settings are read is bounded: a controller whose reports never show
     rest (here: an engine that never says so) is read again after RESTART_SETTLE_S."""
     from smoothjog import host as host_module
-    from smoothjog.core.jogger import Jogger
+    from smoothjog.core.engine import Jogger
 
     monkeypatch.setattr(Jogger, "restart_settled", lambda self: False)
     vs, t_reset, written = _reset_then_press("grbl")

@@ -30,10 +30,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from smoothjog.core.codes import alarm_info, error_info
-from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
-from smoothjog.core.firmware import firmware_facts
-from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
-from smoothjog.core.jogger import (
+from smoothjog.core.engine import (
     EngineEvent,
     EngineLimits,
     EngineView,
@@ -43,6 +40,9 @@ from smoothjog.core.jogger import (
     SendLine,
     SendRealtime,
 )
+from smoothjog.core.errors import ConnectError, LinkError, SmoothjogError
+from smoothjog.core.firmware import firmware_facts
+from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, RESET, STATUS_QUERY

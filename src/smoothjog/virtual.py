@@ -14,8 +14,8 @@ import weakref
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 from typing import TypeVar
 
+from smoothjog.core.engine import EngineEvent, Jogger, JogTuning
 from smoothjog.core.intents import Intent
-from smoothjog.core.jogger import EngineEvent, Jogger, JogTuning
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.responses import Response
 from smoothjog.host import EngineFactory, Host, JogEngine

@@ -16,9 +16,9 @@ import pytest
 from smoothjog.authority.arbiter import Arbiter
 from smoothjog.authority.gate import MotionGate, StopRecord
 from smoothjog.control import ControlRefused, MachineControl
+from smoothjog.core.engine import JogTuning
 from smoothjog.core.errors import InputRefused
 from smoothjog.core.intents import ContinuousIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import JogTuning
 from smoothjog.core.ledger import CONSOLE, foreign
 from smoothjog.core.responses import ErrorReply
 from smoothjog.inputs.base import Input, InputHandle, Notice

@@ -13,8 +13,8 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
+from smoothjog.core.engine import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.intents import Intent
-from smoothjog.core.jogger import EngineLimits, Jogger, JogTuning, Output, SendLine, SendRealtime
 from smoothjog.core.ledger import ENGINE, Entry, Ledger, foreign
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import CYCLE_START, JOG_CANCEL, STATUS_QUERY

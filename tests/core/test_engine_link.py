@@ -5,8 +5,9 @@ from __future__ import annotations
 import re
 
 from smoothjog.core import increments as inc
+from smoothjog.core.engine import JogTuning, SendRealtime
+from smoothjog.core.engine.stream import LINE_SHARE, RELEASE_WAIT_S
 from smoothjog.core.intents import ContinuousIntent
-from smoothjog.core.jogger import LINE_SHARE, RELEASE_WAIT_S, JogTuning, SendRealtime
 from smoothjog.core.realtime import STATUS_QUERY
 from tests.core.engine_harness import START_MPOS, EngineHarness
 
@@ -58,20 +59,20 @@ def test_slow_round_trips_lengthen_the_queue_and_the_blocks() -> None:
     h = EngineHarness()
     _held(h, 2.0, reply_s=0.100)
     engine = h.engine
-    assert engine._rtt_hi_s >= 0.099
+    assert engine.clock.rtt_hi_s >= 0.099
     # The lines the 128-byte RX buffer holds must span the round trip.
     line_bytes = len(h.jog_lines()[-2]) + 1
     rx_lines = 128 // line_bytes - 1
     assert _increment_mm(h.jog_lines()[-2]) / V_MM_S >= 0.1 / rx_lines - 1e-5  # 4 decimals
     # And the queue bridges that round trip beyond the stopping distance.
-    target_mm = inc.queue_target_mm(V_MM_S, A_MM_S2, engine._ahead_s(0.0105, h.t))
+    target_mm = inc.queue_target_mm(V_MM_S, A_MM_S2, engine.stream.ahead_s(0.0105, h.t))
     assert target_mm >= V_MM_S**2 / (2 * A_MM_S2) + V_MM_S * 0.1
 
 
 def test_a_stall_is_remembered_for_thirty_seconds_then_forgotten() -> None:
     h = EngineHarness()
     _held(h, 0.5)
-    typical_s = h.engine._rtt_hi_s
+    typical_s = h.engine.clock.rtt_hi_s
     # One reply held up 0.3 s, then the link is quick again for 20 s of replies.
     engine = h.engine
     h.ok_all()
@@ -80,11 +81,11 @@ def test_a_stall_is_remembered_for_thirty_seconds_then_forgotten() -> None:
         h.poll()
     h.oldest_engine_line().sent_s = h.t - 0.3
     h.ok()
-    assert engine._rtt_hi_s >= 0.299
+    assert engine.clock.rtt_hi_s >= 0.299
     _answers_for(h, 20.0)
-    assert engine._rtt_hi_s >= 0.299  # still sized for the stall
+    assert engine.clock.rtt_hi_s >= 0.299  # still sized for the stall
     _answers_for(h, 11.0)
-    assert engine._rtt_hi_s <= typical_s + 0.005
+    assert engine.clock.rtt_hi_s <= typical_s + 0.005
 
 
 def _answers_for(h: EngineHarness, seconds: float) -> None:
@@ -108,9 +109,11 @@ def test_a_host_that_wakes_late_gets_a_longer_queue() -> None:
         late.t = max(deadline_s + 0.004, late.t + 0.002)
         late.ok_all()
         late.poll()
-    assert late.engine._lateness_s >= 0.0039
-    assert on_time.engine._lateness_s <= 0.002
-    grown_s = late.engine._ahead_s(0.0105, late.t) - on_time.engine._ahead_s(0.0105, on_time.t)
+    assert late.engine.clock.lateness_s >= 0.0039
+    assert on_time.engine.clock.lateness_s <= 0.002
+    grown_s = late.engine.stream.ahead_s(0.0105, late.t) - on_time.engine.stream.ahead_s(
+        0.0105, on_time.t
+    )
     assert grown_s >= 0.0035
 
 
@@ -149,9 +152,9 @@ def test_lines_slower_to_be_answered_than_reports_keep_the_queue_for_their_round
         answers += [h.t + 0.030] * sum(1 for o in out if not isinstance(o, SendRealtime))
         if any(getattr(o, "byte", None) == STATUS_QUERY for o in out):
             report_due_s = h.t + 0.004
-    split = h.engine._split
+    split = h.engine.clock.split
     assert split.ready
     spread_s = split.spread_s()
     assert spread_s is not None
     assert spread_s < 0.003  # the reports show a quick, steady way out
-    assert h.engine._queue_rtt_s(h.t) >= 0.029
+    assert h.engine.clock.queue_rtt_s(h.t) >= 0.029

@@ -28,7 +28,7 @@ def test_a_press_after_a_report_outside_the_travel_jogs_once_a_right_report_come
     assert h.fault_texts() == []
     # The path starts where the machine is: every line is a Y- jog from there.
     assert all("X" not in line for line in h.jog_lines())
-    assert abs(h.engine._track.path[0].start_mm[0] - AT_REST[0]) <= 1 / 80  # one step
+    assert abs(h.engine.track.path[0].start_mm[0] - AT_REST[0]) <= 1 / 80  # one step
 
 
 def test_a_state_no_firmware_has_stops_the_jog_and_says_the_report_may_be_damaged() -> None:

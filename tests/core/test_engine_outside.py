@@ -12,8 +12,8 @@ import dataclasses
 
 import pytest
 
+from smoothjog.core.engine import JogTuning, Phase, bounds
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
-from smoothjog.core.jogger import JogTuning, Phase
 from smoothjog.core.machine import KeepOut
 from tests.core.engine_harness import START_MPOS, EngineHarness, jog_target, kinds
 
@@ -22,9 +22,18 @@ FEED_MM_MIN = 5000.0
 V_MM_S = FEED_MM_MIN / 60
 
 
+def _ghost_clear(h: EngineHarness, deltas: tuple[float, ...]) -> bool:
+    return h.engine.clearance.ghost_clear(deltas, h.engine.signs.rest_inside)
+
+
+def _near_a_junction_at_rest(h: EngineHarness) -> bool:
+    track = h.engine.track
+    return bounds.near_a_junction_at_rest(track, track.x_est_mm, h.engine.tuning)
+
+
 def _estimate_mm(h: EngineHarness, behind_mm: float = 0.0) -> tuple[float, ...]:
     """Where the engine believes the machine is, less behind_mm along the path."""
-    track = h.engine._track
+    track = h.engine.track
     return track.point_at(track.x_est_mm - behind_mm)
 
 
@@ -35,7 +44,7 @@ def _cruising(firmware: str = "grbl") -> EngineHarness:
     h.intent(HELD)
     h.run(1.0)
     h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
-    while h.engine._status_asked_s is None:  # on to the next `?`
+    while h.engine.reports.asked_s is None:  # on to the next `?`
         h.run(h.t + 0.002)
     h.advance(0.003)  # its report comes back a round trip later
     return h
@@ -86,7 +95,7 @@ def test_a_report_as_late_as_its_query_allows_is_no_outside_stop() -> None:
     # v x 0.2 s behind the estimate, and still be a faithful report of a running jog.
     h = _cruising()
     h.advance(0.2)
-    h.engine._track.update_estimate(h.t)  # where the engine expects the machine by now
+    h.engine.track.update_estimate(h.t)  # where the engine expects the machine by now
     h.status("Jog", _estimate_mm(h, behind_mm=0.9 * V_MM_S * 0.2), fs=(3000, 0))
     assert _outside_faults(h) == []
     assert h.engine.phase is Phase.JOGGING
@@ -102,13 +111,13 @@ def test_a_jog_braking_for_the_end_of_what_was_acknowledged_is_no_outside_stop()
     # Lines late on a stalled link: no reply for a while, the estimate runs on along every
     # line sent, while the machine brakes to stop at the end of the acknowledged ones.
     h = _cruising()
-    track = h.engine._track
+    track = h.engine.track
     acked = [seg for seg in track.path if seg.acked]
     acked_end_mm = acked[-1].x0_mm + acked[-1].length_mm
     while track.x_est_mm < acked_end_mm - 0.5:
         h.advance(0.002)
         track.update_estimate(h.t)
-    h.engine._status_asked_s = h.t - 0.003  # a fresh `?`: its age explains no lag
+    h.engine.reports.asked_s = h.t - 0.003  # a fresh `?`: its age explains no lag
     # Stopping from 40 mm/s takes 1.6 mm, and the acknowledged jogs hold just that: the planner
     # brakes to stop at the end of what it holds, which is at least what was acknowledged.
     v_mm_s = 40.0
@@ -131,7 +140,7 @@ def _fresh_slow_link_jog(rest_at_mm: float) -> tuple[EngineHarness, float]:
     reported at rest in Jog rest_at_mm along its path; returns the harness and the first
     block's length."""
     h, first_mm = _long_block_jog(dt_floor_s=None)
-    h.status("Jog", h.engine._track.point_at(rest_at_mm), fs=(0, 0))
+    h.status("Jog", h.engine.track.point_at(rest_at_mm), fs=(0, 0))
     return h, first_mm
 
 
@@ -168,16 +177,16 @@ def _long_block_jog(dt_floor_s: float | None = 0.3) -> tuple[EngineHarness, floa
     h.rest_at(START_MPOS)
     h.intent(ContinuousIntent({"X": -1.0}, 0.6))
     h.run(0.08)
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002)
     h.advance(0.003)
-    return h, h.engine._track.path[0].length_mm
+    return h, h.engine.track.path[0].length_mm
 
 
 def _ask_again(h: EngineHarness, after_s: float) -> None:
     """Let after_s pass, then on to the engine's next `?` and a little past it."""
     h.run(h.t + after_s)
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002)
     h.advance(0.003)
 
@@ -189,7 +198,7 @@ def test_a_fresh_jog_far_slower_than_its_long_block_allows_there_was_stopped_out
     # the machine again and 17 mm ran (fuzz).
     h, first_mm = _long_block_jog()
     assert first_mm > 14.0
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(6.0), fs=(1500, 0))
     _assert_stopped_outside(h, "ran at 1500 mm/min")
 
@@ -201,7 +210,7 @@ def test_a_long_block_speeding_up_cruising_or_braking_for_its_end_is_not_judged(
     for at_mm, fs_mm_min in ((0.4, 1150), (6.0, 2700), (-4.0, 600)):
         h, first_mm = _long_block_jog()
         x_mm = first_mm + at_mm if at_mm < 0 else at_mm
-        h.status("Jog", h.engine._track.point_at(x_mm), fs=(fs_mm_min, 0))
+        h.status("Jog", h.engine.track.point_at(x_mm), fs=(fs_mm_min, 0))
         assert h.fault_texts() == [], (at_mm, fs_mm_min)
         assert h.engine.phase is Phase.JOGGING
 
@@ -212,7 +221,7 @@ def _fresh_fast_jog() -> EngineHarness:
     h.rest_at(START_MPOS)
     h.intent(HELD)
     h.run(0.05)
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002)
     h.advance(0.003)
     return h
@@ -224,7 +233,7 @@ def test_a_fresh_jog_braking_below_what_its_held_jogs_allow_was_stopped_outside(
     # (FluidNC, an outside 0x85), the engine sent its next line into the braking and that line
     # ran 5 mm on (fuzz).
     h = _fresh_fast_jog()
-    track = h.engine._track
+    track = h.engine.track
     held_mm = track.path[-1].x1_mm
     assert held_mm > 10.0  # answered jogs reach far beyond the reports below
     h.status("Jog", track.point_at(0.3), fs=(2400, 0))
@@ -238,13 +247,13 @@ def test_held_jogs_speeding_up_or_braking_for_their_end_are_not_judged() -> None
     # From the same first report: faster later is the planner's own doing, and so is a feed
     # that braking for the end of what was answered allows (the queue ran dry).
     h = _fresh_fast_jog()
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(0.3), fs=(2400, 0))
     _ask_again(h, 0.04)
     h.status("Jog", track.point_at(2.5), fs=(3600, 0))
     assert h.fault_texts() == []
     h = _fresh_fast_jog()
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(0.3), fs=(2400, 0))
     end_mm = track.path[-1].x1_mm
     _ask_again(h, 0.01)  # too soon for a top-up: the end of the answered jogs is where it was
@@ -258,7 +267,7 @@ def test_a_rest_inside_a_block_short_of_its_end_a_report_later_was_stopped_outsi
     # report asked 0.15 s later that finds it still short of that end (moving off again) is
     # a machine someone else stopped there. Unseen at 9600 baud, 22 mm ran (fuzz).
     h, first_mm = _long_block_jog()
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
     assert h.fault_texts() == []
     _ask_again(h, 0.15)
@@ -270,14 +279,14 @@ def test_a_rest_inside_a_block_short_of_its_end_a_report_later_was_stopped_outsi
 
 def test_a_rest_inside_a_block_that_runs_on_to_its_end_is_not_judged() -> None:
     h, first_mm = _long_block_jog()
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
     _ask_again(h, 0.15)
     h.status("Jog", track.point_at(first_mm + 0.3), fs=(1500, 0))  # on into the next block
     assert h.fault_texts() == []
     # Nor is a second report too soon after the first to say the committed segments ran.
     h, first_mm = _long_block_jog()
-    track = h.engine._track
+    track = h.engine.track
     h.status("Jog", track.point_at(first_mm - 1.2), fs=(0, 0))
     h.status("Jog", track.point_at(first_mm - 1.1), fs=(0, 0))
     assert h.fault_texts() == []
@@ -383,14 +392,14 @@ def test_an_outside_stop_on_a_slide_along_a_keep_out_is_seen() -> None:
     h.rest_at(START_MPOS)
     h.intent(ContinuousIntent({"X": -1.0, "Y": -1.0}, 1.0))
     h.run(1.2)
-    track = h.engine._track
+    track = h.engine.track
     here = track.seg_at(track.x_est_mm)
     assert here is not None
-    assert here.speed_mm_s < 0.8 * h.engine._commanded.speed_mm_s  # on the slide
+    assert here.speed_mm_s < 0.8 * h.engine.stream.commanded.speed_mm_s  # on the slide
     # The path tracks the slide at the speed its lines ask for (Y alone at its $111).
     assert abs(here.speed_mm_s - V_MM_S) < 1e-6
     h.status("Jog", _estimate_mm(h), fs=(here.speed_mm_s * 60, 0))
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002)
     h.advance(0.003)
     h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
@@ -409,15 +418,15 @@ def test_an_outside_stop_while_the_engine_waits_to_cancel_its_own_is_seen() -> N
     h.intent(StopIntent())
     h.poll()
     assert h.engine.phase is Phase.STOPPING
-    assert not h.engine._stop.cancelled
+    assert not h.engine.stopping.handshake.cancelled
     h.status("Jog", _estimate_mm(h), fs=(FEED_MM_MIN, 0))
-    while h.engine._status_asked_s is None:  # on to the next `?`
+    while h.engine.reports.asked_s is None:  # on to the next `?`
         h.advance(0.002)
         h.poll()
     h.advance(0.003)
     h.status("Jog", _estimate_mm(h, behind_mm=3.0), fs=(0, 0))
     assert _outside_faults(h), h.fault_texts()
-    assert h.engine._stop.owed
+    assert h.engine.stopping.handshake.owed
     # The stick was already let go: the next press is a press, not a held stick to ignore.
     h.ok_all()
     h.poll()
@@ -495,34 +504,34 @@ def test_a_turn_near_a_keep_out_waits_for_a_report_of_the_machine_at_the_corner(
     # Along the zone's face toward its corner, then a line past the corner and back across the
     # zone's extent: sent while the machine may still be short of the corner, an outside stop
     # would leave it running from there, into the zone (firmware-facts §3.1).
+    from smoothjog.core.engine.tracker import PathSeg
     from smoothjog.core.machine import KeepOut
-    from smoothjog.core.tracker import PathSeg
 
     zone = KeepOut("vise", (-100.0, -30.0, -100.0), (-20.0, -10.0, 0.0))
     h = EngineHarness(keepouts=(zone,))
     h.rest_at((-19.9, -25.0, -1.0))
     h.intent(ContinuousIntent({"Y": 1.0}, 0.1))
     h.poll()
-    track = h.engine._track
+    track = h.engine.track
     track.path.clear()
     track.end_mm = (-19.9, -25.0, -1.0)
     track.append(PathSeg((-19.9, -25.0, -1.0), (-19.9, -9.9, -1.0), 15.1, 8.3, 500.0, 0.0))
     across = (-1.0, 0.0, 0.0)  # from the corner, X- along the zone's edge (outside it)
     track.x_est_mm = 15.0  # the estimate: almost at the corner ...
     track.x_reported_mm = 14.0  # ... the last report: a millimetre short of it (Y -11)
-    assert not h.engine._ghost_clear(across)
+    assert not _ghost_clear(h, across)
     track.x_est_mm = track.x_reported_mm = 15.1  # reported at the corner: the line may go
-    assert h.engine._ghost_clear(across)
+    assert _ghost_clear(h, across)
     track.x_reported_mm = None  # no report of this path yet: from its start
-    assert not h.engine._ghost_clear(across)
+    assert not _ghost_clear(h, across)
 
 
 def test_a_line_behind_unanswered_ones_is_checked_from_where_they_would_take_it() -> None:
     # X+Y+ begun and at once reversed toward a zone: a hold that cuts the X+ line short leaves
     # the X-Y- lines not yet parsed to run one after another from where it stopped, so the
     # next one ends that much further X- (2 mm into the vise in the fuzz, FluidNC over Wi-Fi).
+    from smoothjog.core.engine.tracker import PathSeg
     from smoothjog.core.machine import KeepOut
-    from smoothjog.core.tracker import PathSeg
 
     zone = KeepOut("vise", (-420.0, -420.0, -100.0), (-380.0, -380.0, 0.0))
     h = EngineHarness(keepouts=(zone,))
@@ -530,7 +539,7 @@ def test_a_line_behind_unanswered_ones_is_checked_from_where_they_would_take_it(
     h.rest_at(start)
     h.intent(ContinuousIntent({"X": -1.0, "Y": -1.0}, 1.0))
     h.poll()
-    track = h.engine._track
+    track = h.engine.track
     track.path.clear()
     track.end_mm = start
     turn = (-373.8, -410.4, -32.0)
@@ -545,10 +554,10 @@ def test_a_line_behind_unanswered_ones_is_checked_from_where_they_would_take_it(
     track.x_est_mm = track.x_reported_mm = 0.0
     step = (-0.7254, -0.7254, 0.0)  # ends at X -379.10: outside the zone, as planned
     assert here[0] + step[0] > -380.0
-    assert not h.engine._ghost_clear(step)
+    assert not _ghost_clear(h, step)
     for seg in track.path:  # once they are answered they are planned: a hold throws them away
         seg.acked = True
-    assert h.engine._ghost_clear(step)
+    assert _ghost_clear(h, step)
 
 
 def _suspended(
@@ -570,7 +579,7 @@ def _suspended(
     while seen < reports:
         h.advance(0.002)
         h.poll()
-        asked = h.engine._status_asked_s
+        asked = h.engine.reports.asked_s
         if asked is not None and h.t - asked >= 0.005:
             if reading:
                 replies += len(h.ok_all())
@@ -604,7 +613,7 @@ def test_a_report_asked_before_the_line_can_have_arrived_is_not_counted() -> Non
     # written: a `?` asked in that time comes back before the line is in, and proves nothing.
     # Only reports asked one usual round trip after the line was written are counted.
     h = _start_unread_watch()
-    h.engine._rtt_s = 0.060  # the usual round trip the engine measures on such a bridge
+    h.engine.clock.rtt_s = 0.060  # the usual round trip the engine measures on such a bridge
     _suspended(h, 2, from_feed_mm_min=0.8 * FEED_MM_MIN)
     assert _outside_faults(h) == []
     # A real hold still shows, once the reports are asked late enough.
@@ -650,10 +659,10 @@ def _slow_run_dry(short_mm: float) -> EngineHarness:
     h.intent(SLOW)
     h.run(1.0)
     h.status("Jog", _estimate_mm(h), fs=(SLOW.speed * FEED_MM_MIN, 0))
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002, ack=False)
     h.advance(0.003)
-    track = h.engine._track
+    track = h.engine.track
     acked = [seg for seg in track.path if seg.acked]
     end_mm = acked[-1].x0_mm + acked[-1].length_mm
     h.status("Jog", track.point_at(end_mm - short_mm), fs=(0, 0))
@@ -675,12 +684,12 @@ def _slow_run_out_at_the_soft_limit(short_mm: float) -> EngineHarness:
     h.intent(ContinuousIntent({"X": 1.0}, 0.07))
     h.run(0.2)
     h.status("Jog", _estimate_mm(h), fs=(0.07 * FEED_MM_MIN, 0))
-    track = h.engine._track
+    track = h.engine.track
     while h.path_end()[0] < -0.02:  # until everything sent ends at X's soft limit (0)
         h.run(h.t + 0.002)
     while track.length_mm() - track.x_est_mm > max(short_mm, 0.3):
         h.run(h.t + 0.002)
-    while h.engine._status_asked_s is None:
+    while h.engine.reports.asked_s is None:
         h.run(h.t + 0.002)
     h.advance(0.003)
     h.status("Jog", track.point_at(track.length_mm() - short_mm), fs=(0, 0))
@@ -702,29 +711,29 @@ def test_a_rest_braking_into_a_reversal_from_a_faster_block_is_near_the_junction
     # A Y- step at 25 mm/s with a slow Y+ jog queued behind it: the machine brakes into the
     # reversal from the step's speed, and FluidNC was seen at FS:0 0.41 mm before it (its
     # last segments still running). That is within the step's reach, not the slow jog's.
-    from smoothjog.core.tracker import PathSeg
+    from smoothjog.core.engine.tracker import PathSeg
 
     h = EngineHarness()
-    track = h.engine._track
+    track = h.engine.track
     track.begin((0.0, 0.0, 0.0), 0.0)
     track.append(PathSeg((0.0, 0.0, 0.0), (0.0, -2.764, 0.0), 2.764, 25.0, 500.0, 0.0))
     back = PathSeg((0.0, -2.764, 0.0), (0.0, -2.624, 0.0), 0.14, 7.5, 500.0, 2.764)
     track.append(back)
     assert back.entry_cap_mm_s == 0.0  # a reversal: the planner passes it at rest
     track.x_est_mm = 2.764 - 0.41
-    assert h.engine._near_a_junction_at_rest()
+    assert _near_a_junction_at_rest(h)
     track.x_est_mm = 2.764 - 1.4  # beyond the step's own reach (25²/500 = 1.25 mm)
-    assert not h.engine._near_a_junction_at_rest()
+    assert not _near_a_junction_at_rest(h)
 
 
 def test_fs_0_ahead_of_a_slow_jog_cruising_into_a_reversal_is_near_the_junction() -> None:
     # A stick swept slowly through zero: an X- jog at 313 mm/min with an X+ jog queued behind
     # it. FS is the speed at the end of the prepared segments, so it reads 0 while the machine
     # still cruises the last committed time before the reversal (0.165 mm in the simulator).
-    from smoothjog.core.tracker import PathSeg
+    from smoothjog.core.engine.tracker import PathSeg
 
     h = EngineHarness()
-    track = h.engine._track
+    track = h.engine.track
     track.begin((0.0, 0.0, 0.0), 0.0)
     slow_mm_s = 313 / 60
     track.append(PathSeg((0.0, 0.0, 0.0), (-2.0, 0.0, 0.0), 2.0, slow_mm_s, 500.0, 0.0))
@@ -732,10 +741,10 @@ def test_fs_0_ahead_of_a_slow_jog_cruising_into_a_reversal_is_near_the_junction(
     track.append(back)
     assert back.entry_cap_mm_s == 0.0
     track.x_est_mm = 2.0 - 0.165
-    assert h.engine._near_a_junction_at_rest()
+    assert _near_a_junction_at_rest(h)
     # Beyond what the committed segments cover at that speed: a rest there is someone else's.
     track.x_est_mm = 2.0 - 0.5
-    assert not h.engine._near_a_junction_at_rest()
+    assert not _near_a_junction_at_rest(h)
 
 
 def test_the_path_ends_where_the_firmware_sums_a_long_g91_stream() -> None:
@@ -798,10 +807,10 @@ def test_the_start_of_a_fresh_jog_is_no_junction_at_rest() -> None:
     # A jog starts from rest at its first segment, but speeding up it reports a rising FS; a
     # braking report 14 mm in is someone else's stop, not the start's. Counted as a junction,
     # the start hid a feed hold there, and the lines in the buffer ran 37 mm (fuzz, FTDI).
-    from smoothjog.core.tracker import PathSeg
+    from smoothjog.core.engine.tracker import PathSeg
 
     h = EngineHarness()
-    track = h.engine._track
+    track = h.engine.track
     track.begin((0.0, 0.0, 0.0), 0.0)
     first = PathSeg((0.0, 0.0, 0.0), (-4.794, 0.0, 0.0), 4.794, 87.4, 500.0, 0.0)
     track.append(first)
@@ -811,7 +820,7 @@ def test_the_start_of_a_fresh_jog_is_no_junction_at_rest() -> None:
         track.append(PathSeg((-x0, 0.0, 0.0), (-x0 - 1.736, 0.0, 0.0), 1.736, 87.4, 500.0, x0))
         x0 += 1.736
     track.x_est_mm = 13.75
-    assert not h.engine._near_a_junction_at_rest()
+    assert not _near_a_junction_at_rest(h)
 
 
 def test_a_rest_inside_a_block_holds_back_lines_that_would_enter_a_zone_from_there() -> None:
@@ -835,7 +844,7 @@ def test_a_rest_inside_a_block_holds_back_lines_that_would_enter_a_zone_from_the
     h.ok_all()
     rest = (-375.875, -399.863, -65.308)  # 1.1 mm into the first block, FS:0
     h.status("Jog", rest, fs=(0, 0))
-    assert h.engine._rest_inside is not None
+    assert h.engine.signs.rest_inside is not None
     end = h.t + 0.12
     while h.t < end:
         h.advance(0.005)

@@ -18,15 +18,15 @@ from typing import Any
 import pytest
 
 from smoothjog.core import increments as inc
+from smoothjog.core.engine import EngineLimits, JogTuning, Phase, SendLine
+from smoothjog.core.engine.stopper import MAX_RECANCELS
 from smoothjog.core.errors import JogBuildError
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import ContinuousIntent, GotoIntent, Intent, StepIntent, StopIntent
-from smoothjog.core.jogger import EngineLimits, JogTuning, Phase, SendLine
 from smoothjog.core.ledger import ENGINE, Entry
 from smoothjog.core.machine import KeepOut, MachineModel
 from smoothjog.core.realtime import STATUS_QUERY
 from smoothjog.core.responses import Ok, parse_response
-from smoothjog.core.stopper import MAX_RECANCELS
 from tests.core.engine_harness import (
     ACCEL_MM_S2,
     BANNER,
@@ -435,9 +435,9 @@ STATUS_ROWS = [
             jog({"X": 1.0}),
             stream(0.03),
             ok_all,
-            check(lambda h: not h.engine._track.at_rest_at_end(), "still on its way"),
+            check(lambda h: not h.engine.track.at_rest_at_end(), "still on its way"),
             report("Idle", path_end),
-            check(lambda h: h.engine._track.at_rest_at_end(), "known to rest at the end"),
+            check(lambda h: h.engine.track.at_rest_at_end(), "known to rest at the end"),
             sends(),
         ],
         Expect(Phase.JOGGING, never=("fault",)),
@@ -1419,7 +1419,7 @@ def test_a_relay_that_saw_a_change_gets_a_report_asked_for_at_once() -> None:
     # While a jog runs the engine polls by itself: the hint changes nothing then.
     h.intent(ContinuousIntent({"X": -1.0}, 1.0))
     h.poll()
-    asked = h.engine._status_asked_s
+    asked = h.engine.reports.asked_s
     h.engine.ask_status()
-    assert h.engine._status_asked_s == asked
-    assert h.engine._last_status_sent_s > -math.inf
+    assert h.engine.reports.asked_s == asked
+    assert h.engine.reports.last_sent_s > -math.inf

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 
+from smoothjog.core.engine import JogTuning
+from smoothjog.core.engine.reports import OWED_POLL_S
 from smoothjog.core.intents import ContinuousIntent
-from smoothjog.core.jogger import OWED_POLL_S, JogTuning
 from tests.core.engine_harness import BANNER, START_MPOS, EngineHarness, kinds
 
 HELD = ContinuousIntent({"X": -1.0}, 1.0)
@@ -85,7 +86,7 @@ def test_replies_the_reset_threw_away_are_waited_for_only_a_quiet_spell() -> Non
     assert _watch(h) == ["?"]
     h.status("Jog", RUNNING, fs=(1500, 0))
     assert "0x85" not in _watch(h, 0.001)
-    quiet_s = OWED_POLL_S + h.engine._rtt_hi_s - h.engine._rtt_s
+    quiet_s = OWED_POLL_S + h.engine.clock.rtt_hi_s - h.engine.clock.rtt_s
     assert kinds(h.engine.restart_outputs(h.t + quiet_s))[:1] == ["0x85"]
 
 
@@ -189,9 +190,9 @@ def test_a_jog_waiting_on_old_replies_is_woken_when_they_go_quiet() -> None:
     assert _watch(h, 0.006) == ["?"]  # no 0x85 yet: the last reply came 6 ms ago
     # That `?`'s report may be slow (up to status_timeout_s): the engine's deadline is the end
     # of the quiet spell, when the jog is cancelled.
-    quiet_s = OWED_POLL_S + h.engine._rtt_hi_s - h.engine._rtt_s
+    quiet_s = OWED_POLL_S + h.engine.clock.rtt_hi_s - h.engine.clock.rtt_s
     deadline_s = h.engine.next_deadline_s(h.t)
-    assert deadline_s <= h.engine._restart_reply_s + quiet_s + 1e-9
+    assert deadline_s <= h.engine.restart.reply_s + quiet_s + 1e-9
     assert kinds(h.engine.restart_outputs(deadline_s)) == ["0x85"]
 
 

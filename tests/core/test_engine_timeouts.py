@@ -7,9 +7,9 @@ jog was ignored, with no fault shown.
 
 from __future__ import annotations
 
+from smoothjog.core.engine import Phase
+from smoothjog.core.engine.stopper import MAX_RECANCELS
 from smoothjog.core.intents import ContinuousIntent, StepIntent, StopIntent
-from smoothjog.core.jogger import Phase
-from smoothjog.core.stopper import MAX_RECANCELS
 from tests.core.engine_harness import START_MPOS, EngineHarness, kinds
 
 HELD = ContinuousIntent({"X": -1.0}, 1.0)
@@ -21,7 +21,7 @@ def _released_with_one_reply_lost() -> EngineHarness:
     h.rest_at(START_MPOS)
     h.intent(HELD)
     h.run(0.5)
-    h.status("Jog", h.engine._track.point_at(h.engine._track.x_est_mm), fs=(5000, 0))
+    h.status("Jog", h.engine.track.point_at(h.engine.track.x_est_mm), fs=(5000, 0))
     h.ok_all()
     while not h.unanswered():  # on to the next top-up
         h.advance(0.002)

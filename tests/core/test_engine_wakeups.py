@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
+from smoothjog.core.engine import Phase, SendLine, SendRealtime
 from smoothjog.core.intents import ContinuousIntent, StopIntent
-from smoothjog.core.jogger import Phase, SendLine, SendRealtime
 from smoothjog.core.ledger import ENGINE
 from smoothjog.core.responses import ErrorReply, Ok
 from tests.core.engine_harness import START_MPOS, EngineHarness, status_line
@@ -107,11 +107,11 @@ def test_a_status_report_wants_a_poll_only_when_it_changes_something(
     h.intent(ContinuousIntent({"X": -1.0}, 1.0))
     _drive(h, 0.5)
     assert h.engine.phase is Phase.JOGGING
-    h.engine._track.update_estimate(h.t)
-    x_now = h.engine._track.x_est_mm
+    h.engine.track.update_estimate(h.t)
+    x_now = h.engine.track.x_est_mm
     # The report's own wire time moves it forward; place it so the estimate lands lead_mm on.
-    age_s = (len(status_line(state, START_MPOS)) + 2) * h.engine._byte_s
-    along_mm = x_now + lead_mm - h.engine._track.v_est_mm_s * age_s
+    age_s = (len(status_line(state, START_MPOS)) + 2) * h.engine.clock.byte_s
+    along_mm = x_now + lead_mm - h.engine.track.v_est_mm_s * age_s
     mpos = (START_MPOS[0] - along_mm, START_MPOS[1], START_MPOS[2])
     resp_line = status_line(state, mpos, (5000, 0))
     from smoothjog.core.responses import parse_response
@@ -130,16 +130,16 @@ def test_a_routine_report_wants_a_poll_when_the_next_top_up_comes_after_the_next
     h.intent(ContinuousIntent({"X": -1.0}, 1.0))
     _drive(h, 0.5)
     h.poll()
-    h.engine._track.update_estimate(h.t)
-    age_s = (len(status_line("Jog", START_MPOS)) + 2) * h.engine._byte_s
-    along_mm = h.engine._track.x_est_mm - h.engine._track.v_est_mm_s * age_s
+    h.engine.track.update_estimate(h.t)
+    age_s = (len(status_line("Jog", START_MPOS)) + 2) * h.engine.clock.byte_s
+    along_mm = h.engine.track.x_est_mm - h.engine.track.v_est_mm_s * age_s
     from smoothjog.core.responses import parse_response
 
     resp = parse_response(
         status_line("Jog", (START_MPOS[0] - along_mm, *START_MPOS[1:]), (5000, 0))
     )
     h.model.apply(resp)
-    h.engine._wake_at_s = h.t + 0.2  # the top-up a 200 ms block plans
+    h.engine.stream.wake_at_s = h.t + 0.2  # the top-up a 200 ms block plans
     assert h.engine.on_response(resp, h.t)
     assert h.engine.next_deadline_s(h.t) <= h.t + 0.06
 

@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 import pytest
 
+from smoothjog.core.engine import Phase
 from smoothjog.core.gcode import TravelBox
 from smoothjog.core.intents import (
     ContinuousIntent,
@@ -22,7 +23,6 @@ from smoothjog.core.intents import (
     StepIntent,
     StopIntent,
 )
-from smoothjog.core.jogger import Phase
 from smoothjog.core.machine import KeepOut
 from tests.core.engine_harness import (
     START_MPOS,

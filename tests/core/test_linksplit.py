@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from smoothjog.core.linksplit import MAX_GAP_S, MIN_SAMPLES, WINDOW, LinkSplit
+from smoothjog.core.engine.linksplit import MAX_GAP_S, MIN_SAMPLES, WINDOW, LinkSplit
 
 V_MM_S = 80.0
 WIRE_S = 0.004  # a report's own bytes at 115200 baud

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from smoothjog.core.tracker import (
+from smoothjog.core.engine.tracker import (
     PATH_KEEP_MM,
     PATH_KEEP_SEGMENTS,
     PathSeg,

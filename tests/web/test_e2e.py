@@ -16,8 +16,8 @@ from typing import Any
 import pytest_asyncio
 from bench import measure
 
+from smoothjog.core.engine import JogTuning
 from smoothjog.core.intents import ContinuousIntent, Intent
-from smoothjog.core.jogger import JogTuning
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware

@@ -481,38 +481,74 @@ def _critical_alarms() -> list[int]:
 
 
 def _pin_names() -> list[str]:
-    from smoothjog.core.jogger import _PIN_NAMES
+    from smoothjog.core.engine.reports import PIN_NAMES as _PIN_NAMES
 
     pins = [_PIN_NAMES[p] for p in "HD"]
     return [*pins, " and ".join(pins)]
 
 
+#: The engine's modules whose faults reach the page (core/engine/).
+ENGINE_FAULTS = (
+    "core/engine/jogger.py",
+    "core/engine/phase.py",
+    "core/engine/stopper.py",
+    "core/engine/steps.py",
+    "core/engine/clearance.py",
+)
+SIGNS = "core/engine/signs.py"
+BOUNDS = "core/engine/bounds.py"
+#: The sign-table entries whose words an outside stop's sentence quotes (signs.py).
+OUTSIDE_STOP_SIGNS = (
+    "rest_inside_block",
+    "rest_short_of_acked_path",
+    "lag_behind_estimate",
+    "line_unread",
+    "off_path",
+    "idle_short_of_path_end",
+)
+
+
 def _outside_hows() -> list[str]:
-    """How the stop showed: the words the callers pass, or what _lags_outside found."""
+    """How the stop showed: the words the callers pass, or what a sign found."""
     said = [
         str(node.args[2].value)
-        for node in ast.walk(module("core/jogger.py").tree)
+        for node in ast.walk(module("core/engine/phase.py").tree)
         if isinstance(node, ast.Call)
         and _callee(node) == "_outside_stop"
         and isinstance(node.args[2], ast.Constant)
     ]
     return [
         *said,
-        *method_returns("core/jogger.py", "_lags_outside"),
-        *method_returns("core/jogger.py", "_lines_unread"),
+        *[text for sign in OUTSIDE_STOP_SIGNS for text in method_returns(SIGNS, sign)],
+        *method_returns(BOUNDS, "slowed_inside_a_block"),
+        *method_returns(BOUNDS, "slowed_since"),
     ]
 
 
+def _state_verdicts() -> list[SimpleNamespace]:
+    """The verdicts of the state signs the phase machine shows as faults (signs.py)."""
+    texts = [
+        *method_returns(SIGNS, "hold_or_door_input"),
+        *method_returns(SIGNS, "left_jog_states"),
+    ]
+    return [SimpleNamespace(how=text) for text in texts]
+
+
 def _room_stoppers() -> list[str]:
-    mod = module("core/jogger.py")
-    func = mod.functions["_room_along"][0]
+    mod = module("core/engine/clearance.py")
+    func = mod.functions["room_along"][0]
     return [v for e, i in _assignments(func, "by") for v in build(mod, func, e.elts[i]) if v]  # type: ignore[attr-defined]
 
 
-def _where_blocked(start: tuple[float, ...]) -> str:
-    from smoothjog.core.jogger import Jogger
+def _engine_states() -> list[str]:
+    """Tool has no sentence of its own; Joc is no firmware's (a report damaged on the wire)."""
+    return [*module("core/engine/limits.py").globals["STATE_REASONS"], "Tool", "Joc"]
 
-    return Jogger._where_blocked(_FAKE_LIMITS, start)  # type: ignore[arg-type]
+
+def _where_blocked(start: tuple[float, ...]) -> str:
+    from smoothjog.core.engine.clearance import Clearance
+
+    return Clearance.where_blocked(_FAKE_LIMITS, start)  # type: ignore[arg-type]
 
 
 def _handles() -> list[SimpleNamespace]:
@@ -626,31 +662,39 @@ SAMPLES: dict[str, Any] = {
     "jogger.resp": _CODES,
     "jogger.jogs": [0, 1, 3],
     "jogger.exc": lambda: [JogBuildError(t) for t in _jog_build_texts()],
-    "jogger.start": [(1.25, -3.0, 0.0)],
-    "jogger._step_room_mm.name": ["X+", "Z-"],
-    "jogger._step_room_mm.by": _room_stoppers,
-    "jogger._room_along.zone": [SimpleNamespace(name="clamp")],
-    "jogger._path_problem.zone": [SimpleNamespace(name="clamp")],
-    "jogger._presume_lost.lost": [[object()], [object()] * 3],
-    "jogger.waited_s": [0.55, 12.0],
-    "jogger.err_mm": [0.4, 12.25],
-    "jogger.rest_ahead_mm": [0.42],
-    "jogger.lag_mm": [1.5],
-    "jogger.unread_ms": [102.4, 1500.0],
-    "jogger.pressed": _pin_names,
-    # Tool has no sentence of its own; Joc is no firmware's (a report damaged on the wire).
-    "jogger.state": lambda: [*module("core/jogger.py").globals["_STATE_REASONS"], "Tool", "Joc"],
-    "jogger._outside_stop.how": _outside_hows,
-    "jogger._rested_inside_a_block.rest_mm": [12.5],
-    "jogger._rested_inside_a_block.seg": [SimpleNamespace(x1_mm=13.74)],
-    "jogger._slowed_inside_a_block.feed_mm_min": [1500.0],
-    "jogger._slowed_inside_a_block.into_mm": [6.0],
-    "jogger._slowed_inside_a_block.low_mm_s": [41.7],
-    "jogger._slowed_since_last_report.feed_mm_min": [826.0],
-    "jogger._slowed_since_last_report.low": [60.2],
+    "phase.self": lambda: [
+        SimpleNamespace(model=SimpleNamespace(jog_lock=lock)) for lock in _jog_locks()
+    ],
+    "phase.err_mm": [0.4, 12.25],
+    "phase._outside_stop.who": lambda: method_returns(SIGNS, "who_stopped"),
+    "phase._react_to_state.verdict": _state_verdicts,
+    "clearance.self": [SimpleNamespace(where_blocked=_where_blocked)],
+    "clearance.start": [(1.25, -3.0, 0.0)],
+    "clearance.step_room_mm.name": ["X+", "Z-"],
+    "clearance.step_room_mm.by": _room_stoppers,
+    "clearance.room_along.zone": [SimpleNamespace(name="clamp")],
+    "clearance.path_problem.zone": [SimpleNamespace(name="clamp")],
+    "steps.problem": lambda: method_returns("core/engine/clearance.py", "path_problem"),
+    "stopper.resp": _CODES,
+    "stopper.presume_lost.lost": [1, 3],
+    "stopper.waited_s": [0.55, 12.0],
+    "signs.rest_ahead_mm": [0.42],
+    "signs.lag_mm": [1.5],
+    "signs.unread_ms": [102.4, 1500.0],
+    "signs.ev": lambda: [SimpleNamespace(pressed=p) for p in _pin_names()],
+    "phase.state": _engine_states,
+    "signs.state": _engine_states,
+    "phase._outside_stop.how": _outside_hows,
+    "signs.rest_inside_block.rest_mm": [12.5],
+    "signs.rest_inside_block.seg": [SimpleNamespace(x1_mm=13.74)],
+    "bounds.slowed_inside_a_block.feed_mm_min": [1500.0],
+    "bounds.slowed_inside_a_block.into_mm": [6.0],
+    "bounds.slowed_inside_a_block.low_mm_s": [41.7],
+    "bounds.slowed_since.feed_mm_min": [826.0],
+    "bounds.slowed_since.low": [60.2],
     # JogBuildError's texts.
-    "jogger.axis": ["A"],
-    "jogger.r": [1.5],
+    "stream.axis": ["A"],
+    "stream.r": [1.5],
     "intents.intent": [
         SimpleNamespace(axis="A", dist_mm=250.0, speed=0.0, step_mm=0.0005, counts=1.5, mode="jump")
     ],
@@ -1007,14 +1051,14 @@ def _constants(name: str) -> Pick:
 @cache
 def fault_sites() -> list[Site]:
     """Every `self._fault_now(now_s, text, hint)` of the engine: its texts and its hints."""
-    return _sites("core/jogger.py", _calls("_fault_now", 1, 2))
+    return [site for rel in ENGINE_FAULTS for site in _sites(rel, _calls("fault_now", 1, 2))]
 
 
 @cache
 def jog_build_sites() -> list[Site]:
     return [
         site
-        for rel in ("core/intents.py", "core/jogline.py", "core/jogger.py")
+        for rel in ("core/intents.py", "core/jogline.py", "core/engine/stream.py")
         for site in _sites(rel, _calls("JogBuildError", 0))
     ]
 
@@ -1040,7 +1084,7 @@ def other_sites() -> list[Site]:
     """Why jogging is off, and what the server, gate, arbiter, control, host and link tell the
     page."""
     return [
-        *_sites("core/jogger.py", _returns("can_jog", 1)),
+        *_sites("core/engine/phase.py", _returns("can_jog", 1)),
         *_sites("web/session_backend.py", _dict_values("text", "hint")),
         *_sites("web/session_backend.py", _returns("_warning")),  # the view's warning
         *_sites("web/session_backend.py", _constants(r"[A-Z_]+_(?:TEXT|WARNING)")),
@@ -1128,8 +1172,8 @@ def test_the_patterns_are_read_and_python_reads_them_as_js_does() -> None:
 
 
 def test_every_fault_of_the_engine_is_found_and_built() -> None:
-    source = (SRC / "core/jogger.py").read_text(encoding="utf-8")
-    calls = source.count("self._fault_now(")
+    sources = [(SRC / rel).read_text(encoding="utf-8") for rel in ENGINE_FAULTS]
+    calls = sum(source.count(".fault_now(") for source in sources)
     assert calls >= 14
     # A text and a hint per call (none skipped), each built from SAMPLES; "" is no hint.
     assert len(fault_sites()) == 2 * calls

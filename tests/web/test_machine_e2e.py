@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
+from smoothjog.core.engine import JogTuning
 from smoothjog.core.intents import GotoIntent
-from smoothjog.core.jogger import JogTuning
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
 from smoothjog.sim.firmware import GrblFirmware

@@ -26,8 +26,8 @@ from typing import Final
 
 from smoothjog.authority.commands import command
 from smoothjog.core import realtime
+from smoothjog.core.engine import Phase
 from smoothjog.core.intents import Intent, StopIntent
-from smoothjog.core.jogger import Phase
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE
 from smoothjog.core.responses import StatusReport
 from smoothjog.core.states import (

@@ -24,8 +24,8 @@ from smoothjog.cli.common import (
     link_for,
 )
 from smoothjog.config import Config
+from smoothjog.core.engine import EngineEvent, Jogger, JogTuning
 from smoothjog.core.firmware import FIRMWARE_NAMES
-from smoothjog.core.jogger import EngineEvent, Jogger, JogTuning
 from smoothjog.core.ledger import ENGINE
 from smoothjog.core.units import Vec
 from smoothjog.devices import DeviceReplay, load_device_replay

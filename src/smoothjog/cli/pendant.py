@@ -29,9 +29,9 @@ from smoothjog.cli.common import (
     link_for,
 )
 from smoothjog.config import DEFAULT_HTTP_PORT, Config
+from smoothjog.core.engine import EngineEvent, JogTuning
 from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.firmware import FIRMWARE_NAMES
-from smoothjog.core.jogger import EngineEvent, JogTuning
 from smoothjog.devices import DeviceManager, MachineCommands, check_device_configs, machine_view
 from smoothjog.handshake import format_summary
 from smoothjog.host import Host
