@@ -2,7 +2,23 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
+
+#: Each benchmark's name and its module under bench/ (each has main(argv) -> exit code).
+BENCHMARKS = {
+    "jog": "jog",
+    "fuzz": "fuzz",
+    "micro": "micro",
+    "cpu": "cpu",
+    "cncjs": "cncjs",
+    "proxy": "proxy",
+    "stopat": "stopat",
+    "deadman": "deadman",
+    "lead": "lead",
+    "memory": "memory",
+    "reset": "reset",
+}
 
 
 def main() -> int:
@@ -10,54 +26,10 @@ def main() -> int:
     args = sys.argv[1:]
     name = args[0] if args and not args[0].startswith("-") else "all"
     rest = args[1:] if name != "all" else args
-    if name == "jog":
-        from bench import jog
-
-        return jog.main(rest)
-    if name == "fuzz":
-        from bench import fuzz
-
-        return fuzz.main(rest)
-    if name == "micro":
-        from bench import micro
-
-        return micro.main(rest)
     if name == "sim":
         from bench import bench_sim_speed
 
         return bench_sim_speed.main()
-    if name == "cpu":
-        from bench import cpu
-
-        return cpu.main(rest)
-    if name == "cncjs":
-        from bench import cncjs
-
-        return cncjs.main(rest)
-    if name == "proxy":
-        from bench import proxy
-
-        return proxy.main(rest)
-    if name == "stopat":
-        from bench import stopat
-
-        return stopat.main(rest)
-    if name == "deadman":
-        from bench import deadman
-
-        return deadman.main(rest)
-    if name == "lead":
-        from bench import lead
-
-        return lead.main(rest)
-    if name == "memory":
-        from bench import memory
-
-        return memory.main(rest)
-    if name == "reset":
-        from bench import reset
-
-        return reset.main(rest)
     if name == "all":
         from bench import bench_sim_speed, jog, micro
 
@@ -65,12 +37,12 @@ def main() -> int:
         code |= micro.main([])
         code |= bench_sim_speed.main()
         return code
-    print(
-        f"unknown benchmark {name!r}: use jog, fuzz, micro, sim, cpu, cncjs, proxy, deadman,"
-        " stopat, lead or reset",
-        file=sys.stderr,
-    )
-    return 2
+    module = BENCHMARKS.get(name)
+    if module is None:
+        print(f"unknown benchmark {name!r}: use {', '.join(BENCHMARKS)} or sim", file=sys.stderr)
+        return 2
+    code: int = importlib.import_module(f"bench.{module}").main(rest)
+    return code
 
 
 raise SystemExit(main())

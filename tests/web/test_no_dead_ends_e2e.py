@@ -12,7 +12,7 @@ from collections.abc import AsyncIterator
 
 import pytest_asyncio
 
-from smoothjog.core.jogger import JogTuning
+from smoothjog.core.engine import JogTuning
 from smoothjog.core.ledger import CONSOLE
 from smoothjog.host import Host
 from smoothjog.links.sim import SimLink
