@@ -41,8 +41,8 @@ def main() -> int:
     if module is None:
         print(f"unknown benchmark {name!r}: use {', '.join(BENCHMARKS)} or sim", file=sys.stderr)
         return 2
-    code: int = importlib.import_module(f"bench.{module}").main(rest)
-    return code
+    status: int = importlib.import_module(f"bench.{module}").main(rest)
+    return status
 
 
 raise SystemExit(main())
