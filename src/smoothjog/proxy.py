@@ -22,9 +22,11 @@ pseudo-terminal, `--link`, or a loopback TCP port, `--tcp`) and sees the machine
   a line that overflows it too, so it still gets `error:11` and does nothing.
 - **Replies**: each `ok`/`error` of a sender line goes back to that sender (the ledger names
   the owner), and so does its query output (`[GC:]`, `$N=`, `[VER:]`, ...; `Host` routes query
-  output to the owner of the oldest unanswered line). Status reports, `ALARM`, `[MSG:]` and
-  banners go to everyone: the sender gets smoothjog's status polls too (a report is a report),
-  and its own `?` is answered by the next report, which both sides get.
+  output to the owner of the oldest unanswered line). `ALARM`, `[MSG:]` and banners go to
+  everyone. A status report goes to a sender only in answer to its own `?`: the
+  next report after it (one per `?`, as Grbl folds a second `?` into the report pending), never
+  the reports of smoothjog's own polls, which a sender that counts lines would take for
+  replies.
 - **Who may move the machine**: a sender line that may move it (anything but the queries `$`,
   `$$`, `$#`, `$G`, `$I`, `$N` and empty or comment-only lines) sets the jog lock, "the sender
   is running a job: jogging waits until it is idle", and the engine then refuses jogs with that
@@ -63,8 +65,15 @@ from smoothjog.core.firmware import GRBL, for_model
 from smoothjog.core.gcode import preparse
 from smoothjog.core.ledger import Entry, foreign, line_cost_bytes
 from smoothjog.core.machine import MachineModel
-from smoothjog.core.realtime import EXTENDED_START, GRBLHAL_STOP, PRINTABLE_REALTIME, RESET
-from smoothjog.core.responses import Banner, ErrorReply, Ok, Response
+from smoothjog.core.realtime import (
+    EXTENDED_START,
+    GRBLHAL_STATUS_QUERY,
+    GRBLHAL_STOP,
+    PRINTABLE_REALTIME,
+    RESET,
+    STATUS_QUERY,
+)
+from smoothjog.core.responses import Banner, ErrorReply, Ok, Response, StatusReport
 from smoothjog.core.states import SETTLED_STATES
 from smoothjog.host import Host
 from smoothjog.pty_port import PtyPort
@@ -88,6 +97,9 @@ LOOK_S = 0.02
 MAX_LINE_BUFFER_BYTES = 65536
 #: Sender lines that only ask (they never move the machine or change it), as Grbl stores them.
 QUERY_LINES = frozenset({"", "$", "$$", "$#", "$G", "$I", "$N"})
+
+#: The bytes that ask for a status report (grblHAL's 0x80 too; Grbl drops it unread).
+STATUS_BYTES = frozenset({STATUS_QUERY, GRBLHAL_STATUS_QUERY})
 
 _DEL = 0x7F
 _SUBSTITUTE = b"^"  # refused wherever DEL is (see the module doc)
@@ -238,6 +250,8 @@ class SenderConnection:
         self.assembler = LineAssembler(proxy.firmware)
         #: Every chunk written to this sender, in order (tests read it; bounded).
         self.sent: collections.deque[bytes] = collections.deque(maxlen=10000)
+        #: It sent `?` and has had no status report since: the next one is its answer.
+        self.status_asked = False
 
     def feed(self, data: bytes) -> None:
         """Bytes from the sender."""
@@ -365,6 +379,8 @@ class SenderProxy:
         host = self.host
         if host is None or host.link_error is not None:
             return
+        if byte in STATUS_BYTES:
+            conn.status_asked = True
         if byte == RESET:
             # The reset empties the controller's buffers: the sender's lines not yet forwarded
             # were in them as far as the sender knows. Lines it sends from now on wait for the
@@ -487,7 +503,10 @@ class SenderProxy:
         if route is None:
             if isinstance(resp, Banner):
                 self._on_banner(raw)
-            self._broadcast(raw + b"\r\n")
+            if isinstance(resp, StatusReport):
+                self._answer_status(raw + b"\r\n")
+            else:
+                self._broadcast(raw + b"\r\n")
         elif route.owner == SENDER and isinstance(route.tag, _Line):
             self.stats.sent["owned"] += 1
             route.tag.conn.send(raw + b"\r\n")
@@ -504,6 +523,16 @@ class SenderProxy:
             self._drop_queued()
             for conn in self.connections:
                 conn.assembler.clear()
+
+    def _answer_status(self, data: bytes) -> None:
+        """A status report goes only to the connections that asked `?` since their last one:
+        one report per `?`, as the bare controller gives (smoothjog's own polls are not theirs;
+        a sender that counts lines took them for replies)."""
+        for conn in list(self.connections):
+            if conn.greeted and conn.status_asked:
+                conn.status_asked = False
+                self.stats.sent["broadcast"] += 1
+                conn.send(data)
 
     def _broadcast(self, data: bytes) -> None:
         for conn in list(self.connections):

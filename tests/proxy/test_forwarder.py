@@ -321,12 +321,35 @@ def test_smoothjog_jogs_again_once_the_sender_is_idle() -> None:
         await _wait(lambda: r.host.model.jog_lock is None, timeout_s=15.0)
         start = r.host.model.mpos_mm
         assert start is not None
-        await _hold_stick(r, 1.0)
+        hold = asyncio.get_running_loop().create_task(_hold_stick(r, 1.0))
+        await asyncio.sleep(0.5)
+        sender.write("?")  # the sender asks while smoothjog jogs
+        await hold
         await _wait(r.host.at_rest)
         end = r.host.model.mpos_mm
         assert end is not None
         assert start[0] - end[0] > 5.0
         reports = [x for x in sender.lines() if x.startswith("<Jog|")]
-        assert reports, "the sender sees smoothjog's jog in the reports"
+        assert len(reports) == 1, "the sender's `?` shows smoothjog's jog"
+
+    run_proxy(body)
+
+
+def test_a_sender_gets_one_status_report_per_question_mark_and_none_unasked() -> None:
+    async def body(r: ProxyRig) -> None:
+        sender = r.sender()
+        # Idle for 2 s while smoothjog polls: none of its reports is the sender's.
+        await asyncio.sleep(2.0)
+        assert not [x for x in sender.lines() if x.startswith("<")]
+        for _ in range(3):
+            sender.write("?")
+            await asyncio.sleep(0.3)
+        assert len([x for x in sender.lines() if x.startswith("<")]) == 3
+        # A job streaming meanwhile still gets only what it asks for, and every reply.
+        since = len(sender.lines())
+        sender.write("G1X-20F3000\n")
+        await sender.wait_replies(1, since)
+        await asyncio.sleep(1.0)
+        assert not [x for x in sender.lines()[since:] if x.startswith("<")]
 
     run_proxy(body)
