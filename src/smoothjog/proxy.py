@@ -59,7 +59,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from smoothjog.authority.gate import engine_has_motion
+from smoothjog.authority.gate import MotionGate, engine_has_motion
 from smoothjog.core.errors import LinkError, SmoothjogError
 from smoothjog.core.firmware import GRBL, for_model
 from smoothjog.core.gcode import preparse
@@ -84,6 +84,8 @@ logger = logging.getLogger(__name__)
 SENDER = foreign("sender")
 #: The source of the proxy's jog lock (Host.set_jog_lock).
 LOCK_SOURCE = "sender"
+#: Who stopped the machine when the sender went away mid-job (every page is told).
+GONE = "the sender closing its port mid-job"
 #: Why jogging waits while the sender has the machine.
 JOB_LOCK = "the sender is running a job: jogging waits until it is idle"
 #: Seconds of rest (nothing of the sender's in hand, the controller Idle) before jogs may go.
@@ -272,7 +274,7 @@ class SenderConnection:
             self.close()
 
     def close(self) -> None:
-        """The sender closed the port; its lines already queued still go (the machine runs)."""
+        """The sender closed the port (the proxy drops its queued lines once none is open)."""
         if self.open:
             self.open = False
             self.proxy.disconnected(self)
@@ -294,6 +296,8 @@ class SenderProxy:
         self.quiet_s = quiet_s
         self.lock_reason = lock_reason
         self.host: Host | None = None
+        #: The session's motion gate (gated()); None before the session has one.
+        self.gate: MotionGate | None = None
         self.stats = ProxyStats()
         self.connections: list[SenderConnection] = []
         self._queue: collections.deque[_Line] = collections.deque()
@@ -367,11 +371,26 @@ class SenderProxy:
             loop.call_soon(greet)
         return conn
 
+    def gated(self, gate: MotionGate) -> None:
+        """The session's motion gate: it stops what a sender that went away left running."""
+        self.gate = gate
+
     def disconnected(self, conn: SenderConnection) -> None:
-        """A connection closed (SenderConnection.close calls this)."""
+        """A connection closed (SenderConnection.close calls this). A sender that went away
+        takes its lines with it: those not yet forwarded are dropped, and motion its lines
+        already in the controller drive is stopped (the gate's feed hold), so the next sender
+        to open the port starts clean and nothing runs for a program that is gone."""
         with contextlib.suppress(ValueError):
             self.connections.remove(conn)
         logger.info("the sender closed %s", conn.name)
+        if self.connections:
+            return
+        moving = self._motion_in_hand() or (
+            self._locked and self.host is not None and self.host.model.state not in SETTLED_STATES
+        )
+        self._drop_queued()
+        if moving and self.gate is not None:
+            self.gate.stop(GONE)
 
     # ----------------------------------------------------------------- from the sender
     def realtime_from(self, conn: SenderConnection, byte: bytes) -> None:

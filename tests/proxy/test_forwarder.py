@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 
+from smoothjog.authority.gate import MotionGate
 from smoothjog.core.intents import ContinuousIntent, StopIntent
 from smoothjog.core.ledger import CONSOLE, ENGINE, HANDSHAKE
 from smoothjog.proxy import JOB_LOCK, SENDER
@@ -351,5 +352,52 @@ def test_a_sender_gets_one_status_report_per_question_mark_and_none_unasked() ->
         await sender.wait_replies(1, since)
         await asyncio.sleep(1.0)
         assert not [x for x in sender.lines()[since:] if x.startswith("<")]
+
+    run_proxy(body)
+
+
+def test_a_sender_that_goes_away_mid_job_takes_its_lines_and_its_motion_with_it() -> None:
+    # Forty short moves: more than the planner and the RX buffer hold, so some wait here.
+    moves = [f"G1 F3000 X{-10 - 4 * i} Y{-10 - 10 * (i % 2)}" for i in range(40)]
+    long_job = ["G21 G90 G94", *moves]
+
+    async def body(r: ProxyRig) -> None:
+        gate = MotionGate(r.host)
+        r.proxy.gated(gate)
+        stops: list[str] = []
+        gate.add_stop_listener(lambda record: stops.append(record.text))
+        sender = r.sender()
+        await asyncio.sleep(0.05)
+        await _stream(sender.write, long_job)
+        await _wait(lambda: r.firmware.status_state() == "Run")
+        await asyncio.sleep(0.5)
+        assert sender.conn is not None
+        sender.conn.close()  # the sender's process died
+        await asyncio.sleep(2.0)
+        assert r.firmware.status_state() == "Hold:0"
+        held_at = r.firmware.mpos_mm()
+        await asyncio.sleep(1.0)
+        assert r.firmware.mpos_mm() == held_at
+        assert held_at[0] > -166.0 + 1.0  # far from where the job would have ended
+        assert stops == [
+            "stopped by the sender closing its port mid-job: the machine is in feed hold: press"
+            " Resume to go on or Reset to end the program"
+        ]
+        assert r.proxy.stats.lines_dropped > 0
+
+    run_proxy(body)
+
+
+def test_a_sender_that_goes_away_at_rest_stops_nothing() -> None:
+    async def body(r: ProxyRig) -> None:
+        gate = MotionGate(r.host)
+        r.proxy.gated(gate)
+        sender = r.sender()
+        assert await sender.ask("$G")
+        assert sender.conn is not None
+        sender.conn.close()
+        await asyncio.sleep(0.5)
+        assert gate.last_stop is None
+        assert r.firmware.status_state() == "Idle"
 
     run_proxy(body)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from smoothjog.authority.arbiter import Arbiter
+from smoothjog.authority.gate import MotionGate
 from smoothjog.cli.common import (
     add_connection_args,
     config_from_args,
@@ -55,6 +56,9 @@ class SessionHooks(Protocol):
 
     def started(self, host: Host) -> None:
         """That host finished its handshake."""
+
+    def gated(self, gate: MotionGate) -> None:
+        """The session's motion gate, once (it follows every host)."""
 
 
 @dataclass
@@ -244,6 +248,8 @@ async def run_session(
             speed_ratios=config.jog.speed_ratios,
             default_speed=config.jog.default_speed,
         )
+        if hooks is not None:
+            hooks.gated(backend.gate)
         # One arbiter for the session: every input (the pages now, devices beside them) asks
         # it for control, and it owns the dead-man lease and the stop when an input goes away.
         arbiter = Arbiter(backend)
