@@ -145,7 +145,8 @@ class PtyPeer:
     """A ScriptedGrbl behind a pseudo-terminal; connect a SerialLink to `.path`.
 
     Like an Arduino, it prints the banner each time the port is opened (DTR reset), after a short
-    pause standing in for the bootloader; `banner_on_open=False` skips it.
+    pause standing in for the bootloader; `banner_on_open=False` skips it. What the client sends
+    during that pause is lost, as in a bootloader: it is kept in `swallowed`, never answered.
     """
 
     def __init__(
@@ -159,6 +160,8 @@ class PtyPeer:
         self.grbl = grbl if grbl is not None else ScriptedGrbl()
         self.banner_on_open = banner_on_open
         self.boot_s = boot_s
+        #: Bytes the client sent while the peer was booting (the bootloader took them).
+        self.swallowed = bytearray()
         self._master, slave = os.openpty()
         self.path = os.ttyname(slave)
         # With no slave fd open here, the master reports a hang-up until a client opens the
@@ -210,6 +213,7 @@ class PtyPeer:
                 client_open = True
                 if self.banner_on_open:
                     time.sleep(self.boot_s)
+                    self._swallow()
                     self._send(self.grbl.banner())
             if master_events & select.POLLIN:
                 try:
@@ -217,6 +221,17 @@ class PtyPeer:
                 except OSError:
                     continue
                 self._send(self.grbl.receive(data))
+
+    def _swallow(self) -> None:
+        """Take in, unanswered, whatever the client sent while booting."""
+        while select.select([self._master], [], [], 0)[0]:
+            try:
+                data = os.read(self._master, 65536)
+            except OSError:
+                return
+            if not data:
+                return
+            self.swallowed += data
 
     def _send(self, data: bytes) -> None:
         """Write a reply, ignoring a client that just went away."""

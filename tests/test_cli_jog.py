@@ -85,6 +85,7 @@ _SUMMARY = re.compile(
     r"  stops           (?P<stops>\d+)\n"
     r"  tracked - real  (?P<um>[-\d.]+) µm, (?P<steps>[-\d.]+) steps \(worst axis, worst stop\)\n"
     r"  final state     (?P<state>\S+) at MPos (?P<mpos>[-\d., ]+)\n"
+    r"(?:  told:\n(?P<notes>(?:    - .*\n)+))?"
     r"(?:  faults          none\n|  faults:\n(?P<faults>(?:    - .*\n)+))\Z"
 )
 
@@ -251,6 +252,49 @@ def test_a_bad_replay_file_is_one_sentence(
     assert lines[0].startswith("smoothjog: "), lines[0]
     assert str(path) in lines[0], lines[0]
     assert needle in lines[0], lines[0]
+
+
+HOBBY_ROUTER = (
+    Path(__file__).resolve().parent.parent
+    / "src"
+    / "smoothjog"
+    / "data"
+    / "machines"
+    / "hobby-router.toml"
+)
+
+
+def powered_up_router(path: Path, *, homing: bool = True) -> Path:
+    """The hobby router just switched on: MPos 0, in Alarm when homing is on ($22=1)."""
+    text = HOBBY_ROUTER.read_text(encoding="utf-8").replace('start = "homed"', 'start = "power-up"')
+    if not homing:
+        text = text.replace("22 = 1 ", "22 = 0 ")
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_a_machine_in_alarm_at_power_up_is_refused_in_words(tmp_path: Path) -> None:
+    """$22=1 at power-up: Alarm. Nothing runs; one sentence says why and what to do next."""
+    machine = powered_up_router(tmp_path / "alarm.toml")
+    result = run_jog("--replay", str(EXAMPLE), "--machine", str(machine))
+    assert result.returncode != 0
+    assert result.stdout == ""
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("smoothjog: jogging refused"), lines[0]
+    assert "the controller is in Alarm: unlock with $X or home with $H first" in lines[0]
+
+
+def test_an_unhomed_machine_is_warned_and_a_clipped_jog_told(tmp_path: Path) -> None:
+    """Soft limits on, homing off, MPos 0 at power-up: a + jog goes nowhere, and says so."""
+    machine = powered_up_router(tmp_path / "unhomed.toml", homing=False)
+    script = write_replay(
+        tmp_path / "plus.jsonl", '{"t": 0, "axes": {"x": 1}}', '{"t": 1, "axes": {"x": 0}}'
+    )
+    result = run_jog("--replay", str(script), "--machine", str(machine))
+    assert "the machine looks unhomed" in result.stderr
+    assert "the jog stops at the soft limit" in result.stdout
 
 
 def test_an_unknown_machine_is_one_sentence(tmp_path: Path) -> None:

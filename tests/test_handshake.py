@@ -22,7 +22,7 @@ async def test_handshake_over_serial_with_banner() -> None:
     grbl = ScriptedGrbl(mpos=(-10.0, -20.0, -1.5), wco=(-5.0, -5.0, 0.0))
     grbl.settings[110] = "3000.000"
     grbl.settings[122] = "50.000"
-    with PtyPeer(grbl, boot_s=0.05) as peer:
+    with PtyPeer(grbl, boot_s=0.01) as peer:
         async with SerialLink(peer.path, wait_banner_s=30) as link:
             model = await handshake(link, timeout_s=10)
     assert (model.firmware, model.version) == ("grbl", "1.1h")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
 import pytest
@@ -60,3 +61,23 @@ def test_udev_rules_cover_every_raw_device(capsys: pytest.CaptureFixture[str]) -
         assert f'ATTRS{{idVendor}}=="{vid}", ATTRS{{idProduct}}=="{pid}"' in rules
     assert 'ATTRS{idVendor}=="256f"' in rules
     assert 'GROUP="plugdev"' in rules
+
+
+FTDI_LATENCY_RULE = 'SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio", ATTR{latency_timer}="1"'
+
+
+def test_udev_rules_set_the_ftdi_latency_timer(capsys: pytest.CaptureFixture[str]) -> None:
+    """The printed rules end with the FTDI one (16 ms late replies otherwise), which also ships
+    as its own file."""
+    assert main(["devices", "--udev-rules"]) == 0
+    rules = capsys.readouterr().out
+    assert FTDI_LATENCY_RULE in rules.splitlines()
+    assert 'GROUP="plugdev"' in rules  # the input devices' rules are still there, first
+    assert rules.index('GROUP="plugdev"') < rules.index(FTDI_LATENCY_RULE)
+    shipped = resources.files("smoothjog").joinpath(
+        "data", "udev", "99-smoothjog-ftdi-latency.rules"
+    )
+    rule_lines = [
+        line for line in shipped.read_text(encoding="utf-8").splitlines() if line and line[0] != "#"
+    ]
+    assert rule_lines == [FTDI_LATENCY_RULE]

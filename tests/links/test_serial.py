@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import os
+import time
 from pathlib import Path
 
 import pytest
 
 from smoothjog.core.errors import LinkError
+from smoothjog.core.responses import StatusReport, parse_response
 from smoothjog.links.base import RefusedError
 from smoothjog.links.serial import SerialLink
 from tests.links.conftest import RawPty
@@ -32,12 +34,40 @@ async def test_open_waits_for_the_banner_and_keeps_it() -> None:
 
 
 async def test_open_without_banner_returns_after_the_wait() -> None:
-    """A controller that prints no banner still opens; the handshake decides later."""
-    with PtyPeer(banner_on_open=False) as peer:
+    """A controller that prints no banner and answers no `?` still opens after the wait; the
+    handshake decides later."""
+    with PtyPeer(ScriptedGrbl(answer_status=False), banner_on_open=False) as peer:
         async with SerialLink(peer.path, wait_banner_s=0.2) as link:
             assert not link.banner_seen
             await link.send_line("")
             assert await link.read_line() == b"ok"
+
+
+async def test_open_without_reset_asks_status_and_returns_at_once() -> None:
+    """A controller that does not reset on open (grblHAL, a board without the DTR reset) prints
+    no banner: open() asks `?` and returns on its report instead of waiting for a banner."""
+    with PtyPeer(banner_on_open=False) as peer:
+        start_s = time.monotonic()
+        async with SerialLink(peer.path, wait_banner_s=5) as link:
+            opened_s = time.monotonic() - start_s
+            assert not link.banner_seen
+            assert isinstance(parse_response(await link.read_line()), StatusReport)
+        assert opened_s < 1.0
+        assert peer.grbl.received_realtime == [ord("?")]
+        assert peer.grbl.received_lines == []
+
+
+async def test_open_waits_for_a_slow_boot_sending_only_status_queries() -> None:
+    """An Arduino's bootloader holds the banner back after the DTR reset: open() waits for it
+    and keeps it, and all it sent meanwhile is `?` (nothing a restarting controller would run)."""
+    with PtyPeer(boot_s=0.8) as peer:
+        async with SerialLink(peer.path, wait_banner_s=5) as link:
+            assert link.banner_seen
+            assert await link.read_line() == b""
+            assert await link.read_line() == b"Grbl 1.1h ['$' for help]"
+        assert len(peer.swallowed) >= 2
+        assert set(peer.swallowed) == {ord("?")}
+        assert peer.grbl.received_lines == []
 
 
 async def test_line_goes_out_with_exactly_one_newline(raw_pty: RawPty) -> None:

@@ -1088,6 +1088,7 @@ def other_sites() -> list[Site]:
         *_sites("web/session_backend.py", _dict_values("text", "hint")),
         *_sites("web/session_backend.py", _returns("_warning")),  # the view's warning
         *_sites("web/session_backend.py", _constants(r"[A-Z_]+_(?:TEXT|WARNING)")),
+        *_sites("core/machine.py", _constants(r"UNHOMED_WARNING")),  # the view's warning's words
         # The motion gate: why a jog, a command or a line waits, and who stopped what.
         *_sites(GATE, _constants(r"[A-Z_]+_TEXT")),
         *[site for method in GATE_TEXTS for site in _sites(GATE, _returns(method))],

@@ -14,6 +14,9 @@ from typing import Any
 from smoothjog.inputs.discovery import UDEV_RULES_NAME, FoundDevice, choose, scan
 from smoothjog.inputs.kinds import DECODERS, KIND_NAMES
 
+#: The serial side: FTDI adapters hand on received bytes within 1 ms instead of 16 ms.
+FTDI_LATENCY_RULES_NAME = "99-smoothjog-ftdi-latency.rules"
+
 
 def register(subparsers: Any) -> None:
     """Add `devices` to the command line."""
@@ -25,7 +28,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--udev-rules",
         action="store_true",
-        help=f"print the udev rules file ({UDEV_RULES_NAME}) that gives access to the devices",
+        help=f"print the udev rules file ({UDEV_RULES_NAME}) that gives access to the devices"
+        f" and sets FTDI serial adapters' latency timer to 1 ms ({FTDI_LATENCY_RULES_NAME})",
     )
     parser.add_argument("--all", action="store_true", help="also list nodes no decoder takes")
     parser.add_argument("--sysfs", default="/sys", help=argparse.SUPPRESS)
@@ -34,11 +38,11 @@ def register(subparsers: Any) -> None:
 
 
 def udev_rules() -> str:
-    """The shipped rules file's text."""
-    return (
-        resources.files("smoothjog")
-        .joinpath("data", "udev", UDEV_RULES_NAME)
-        .read_text(encoding="utf-8")
+    """The shipped rules files' text: the input devices' access, then the FTDI latency timer."""
+    folder = resources.files("smoothjog").joinpath("data", "udev")
+    return "\n".join(
+        folder.joinpath(name).read_text(encoding="utf-8")
+        for name in (UDEV_RULES_NAME, FTDI_LATENCY_RULES_NAME)
     )
 
 

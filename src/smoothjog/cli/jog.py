@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,8 +26,11 @@ from smoothjog.cli.common import (
 )
 from smoothjog.config import Config
 from smoothjog.core.engine import EngineEvent, Jogger, JogTuning
+from smoothjog.core.errors import SmoothjogError
 from smoothjog.core.firmware import FIRMWARE_NAMES
+from smoothjog.core.intents import ContinuousIntent, Intent, StopIntent
 from smoothjog.core.ledger import ENGINE
+from smoothjog.core.machine import UNHOMED_WARNING
 from smoothjog.core.units import Vec
 from smoothjog.devices import DeviceReplay, load_device_replay
 from smoothjog.host import Host
@@ -90,6 +94,10 @@ class Summary:
     idle: bool = False
     lines_sent: int = 0
     faults: list[str] = field(default_factory=list)
+    #: News the engine told that is no fault (a jog clipped at a soft limit), once each.
+    notes: list[str] = field(default_factory=list)
+    #: Why intents of the script were refused (the controller left Idle mid-script), once each.
+    refused: list[str] = field(default_factory=list)
     #: What a replayed device did, in lines (None for a --replay script).
     device: list[str] | None = None
 
@@ -111,6 +119,9 @@ class Summary:
         ]
         if self.device is not None:
             out += [f"  {line}" for line in self.device]
+        if self.notes:
+            out.append("  told:")
+            out += [f"    - {note}" for note in self.notes]
         if self.faults:
             out.append("  faults:")
             out += [f"    - {f}" for f in self.faults]
@@ -134,7 +145,37 @@ def _fill(summary: Summary, engine: Jogger, events: list[EngineEvent]) -> None:
     summary.final_state = engine.model.state
     summary.faults = [
         e.text + (f" ({e.hint})" if e.hint else "") for e in events if e.kind == "fault"
-    ]
+    ] + [f"jog refused: {why}" for why in summary.refused]
+    summary.notes = list(
+        dict.fromkeys(
+            e.text + (f" ({e.hint})" if e.hint else "") for e in events if e.kind == "info"
+        )
+    )
+
+
+class JogRefusedError(SmoothjogError):
+    """The controller refuses jogging from the start (Alarm, a hold, a door...): nothing runs."""
+
+
+def _moves(intent: Intent) -> bool:
+    """True for an intent that asks for motion (not a stop or a released stick)."""
+    if isinstance(intent, StopIntent):
+        return False
+    if isinstance(intent, ContinuousIntent):
+        return any(value != 0 for value in intent.axes.values())
+    return True
+
+
+def _refuse_at_start(host: Host) -> None:
+    """Raise JogRefusedError, in the engine's words, when no jog may start on this controller;
+    warn on stderr about a machine that looks unhomed (soft limits then count from power-up)."""
+    engine = host.engine
+    assert engine is not None
+    may_jog, why = engine.can_jog()
+    if not may_jog and host.model.state is not None:
+        raise JogRefusedError(f"jogging refused, the script was not run: {why}")
+    if host.model.state == "Idle" and host.model.looks_unhomed():
+        print(f"smoothjog: warning: {UNHOMED_WARNING}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -201,11 +242,17 @@ async def _run(
         rig_t0 = link.rig.now_s if isinstance(link, SimLink) else 0.0
         summary = Summary()
         try:
+            _refuse_at_start(host)
             if isinstance(script, DeviceReplay):
                 summary.device = await script.play(host)
             else:
                 for item in script:
                     await asyncio.sleep(max(t0 + item.t_s - loop.time(), 0.0))
+                    if _moves(item.intent):
+                        assert host.engine is not None
+                        may_jog, why = host.engine.can_jog()
+                        if not may_jog and why is not None and why not in summary.refused:
+                            summary.refused.append(why)
                     host.set_intent(item.intent)
             try:
                 await host.wait_idle(settle_s)

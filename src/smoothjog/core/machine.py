@@ -63,6 +63,13 @@ _MAX_AXES = len(ALL_AXES)
 SMALLEST_USABLE_BLOCKS = min(facts.planner_usable_blocks for facts in FIRMWARES.values())
 
 
+#: Said while jogging is allowed on a machine that looks unhomed (MPos 0 after an unlock).
+UNHOMED_WARNING = (
+    "the machine looks unhomed (MPos 0 after an unlock): soft limits count from where it was"
+    " switched on; jog it off a limit switch if you must, then home it with $H"
+)
+
+
 @dataclass(frozen=True, slots=True)
 class KeepOut:
     """A named box in machine mm that jogs must not enter (a vise, a clamp, a probe dock).

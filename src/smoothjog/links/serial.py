@@ -20,14 +20,20 @@ import serial
 
 from smoothjog.core.errors import LinkError
 from smoothjog.core.firmware import BITS_PER_BYTE_8N1
-from smoothjog.core.responses import Banner, parse_response
+from smoothjog.core.realtime import STATUS_QUERY
+from smoothjog.core.responses import Banner, StatusReport, parse_response
 from smoothjog.links.base import READ_CHUNK_BYTES, WRITE_CHUNK_BYTES, LineInbox, Link, OutQueue
 
 #: Grbl's default baud rate (firmware-facts §5.1).
 DEFAULT_BAUD = 115200
 #: An Arduino-based Grbl resets when the port opens (DTR); its bootloader waits about 1-2 s before
-#: Grbl prints the banner.
+#: Grbl prints the banner. open() waits at most this long for a first sign of life.
 DEFAULT_WAIT_BANNER_S = 2.5
+#: How long open() waits for a banner before asking `?`: a controller that does not reset on open
+#: (grblHAL, FluidNC, a Grbl board without the DTR reset) prints none and answers `?` at once.
+QUICK_BANNER_S = 0.05
+#: How often `?` is asked again while nothing answers (a controller still in its bootloader).
+PROBE_INTERVAL_S = 0.25
 
 
 def is_banner(line: bytes) -> bool:
@@ -35,8 +41,13 @@ def is_banner(line: bytes) -> bool:
     return isinstance(parse_response(line), Banner)
 
 
+def _is_alive(line: bytes) -> bool:
+    """True for a banner (the controller restarted) or a status report (it runs, no reset)."""
+    return isinstance(parse_response(line), (Banner, StatusReport))
+
+
 class SerialLink(Link):
-    """A serial port to a controller; `open()` waits for the reset banner."""
+    """A serial port to a controller; `open()` waits for the reset banner or a status report."""
 
     def __init__(
         self,
@@ -72,7 +83,8 @@ class SerialLink(Link):
         return self._out.size
 
     async def open(self) -> None:
-        """Open the port and wait up to wait_banner_s for the banner a reset prints."""
+        """Open the port and wait up to wait_banner_s for a sign of life: the banner a reset
+        prints, or the answer to `?` from a controller that did not reset (see _await_life)."""
         if self._serial is not None:
             return
         if self.baud <= 0:
@@ -88,10 +100,31 @@ class SerialLink(Link):
         self._inbox = LineInbox()
         self._error = None
         loop.add_reader(self._fd, self._on_readable)
-        self.banner_seen = await self._inbox.wait_for(is_banner, self.wait_banner_s)
+        self.banner_seen = await self._await_life()
         if self._error is not None:
             await self.close()
             raise self._error
+
+    async def _await_life(self) -> bool:
+        """Wait for a banner or a status report; True when a banner came.
+
+        A banner within QUICK_BANNER_S ends the wait. Otherwise `?` is asked, and again every
+        PROBE_INTERVAL_S: a controller that did not reset answers it within a round trip, so
+        connecting to it takes no banner wait; one that is still booting (an Arduino's bootloader
+        after the DTR reset) ignores it and prints its banner later. Only `?` is sent here: a
+        realtime byte that a restarting controller runs as nothing but a report. Nothing is read
+        from the inbox: the banner or report stays for the handshake.
+        """
+        loop = asyncio.get_running_loop()
+        deadline_s = loop.time() + self.wait_banner_s
+        wait_s = min(QUICK_BANNER_S, self.wait_banner_s)
+        while not await self._inbox.wait_for(_is_alive, wait_s):
+            remaining_s = deadline_s - loop.time()
+            if remaining_s <= 0 or self._error is not None or self._inbox.ended:
+                return False
+            self._write_realtime(STATUS_QUERY)
+            wait_s = min(PROBE_INTERVAL_S, remaining_s)
+        return any(is_banner(line) for line in self._inbox.peek())
 
     async def read_line(self) -> bytes:
         """The next received line without its end-of-line."""

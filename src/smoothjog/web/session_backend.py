@@ -16,14 +16,9 @@ from smoothjog.authority.gate import MotionGate, StopRecord
 from smoothjog.control import WCS_WORDS, CommandResult, MachineControl
 from smoothjog.core.codes import describe_alarm
 from smoothjog.core.intents import Intent
+from smoothjog.core.machine import UNHOMED_WARNING
 from smoothjog.host import Host
 from smoothjog.web.protocol import CommandMessage
-
-#: Said while jogging is allowed on a machine that looks unhomed (MPos 0 after an unlock).
-UNHOMED_WARNING = (
-    "the machine looks unhomed (MPos 0 after an unlock): soft limits count from where it was"
-    " switched on; jog it off a limit switch if you must, then home it with $H"
-)
 
 
 def _finite(values: object) -> list[float | None] | None:
