@@ -18,7 +18,10 @@ from pathlib import Path
 
 import pytest
 
-REALFW_DIR = Path(os.environ.get("REALFW_DIR", "/work/shared/realfw"))
+#: The shared folder beside this repository (as CI lays it out), or $REALFW_DIR.
+REALFW_DIR = Path(
+    os.environ.get("REALFW_DIR", Path(__file__).resolve().parents[2] / "shared" / "realfw")
+)
 _SCRIPTS = {"grbl": "grblpty.py", "grblhal": "grblhalpty.py"}
 
 
@@ -35,7 +38,7 @@ def _build(kind: str) -> Path:
         check=False,
     )
     if build.returncode != 0:
-        pytest.skip(f"realfw build.sh {kind} failed: {build.stderr[-300:]}")
+        pytest.fail(f"realfw build.sh {kind} failed: {build.stderr[-300:]}")
     return script
 
 

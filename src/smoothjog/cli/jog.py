@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any
 
+from smoothjog.authority.gate import MotionGate
 from smoothjog.cli.common import (
     add_connection_args,
     config_from_args,
@@ -166,13 +167,12 @@ def _moves(intent: Intent) -> bool:
     return True
 
 
-def _refuse_at_start(host: Host) -> None:
-    """Raise JogRefusedError, in the engine's words, when no jog may start on this controller;
+def _refuse_at_start(gate: MotionGate) -> None:
+    """Raise JogRefusedError, in the gate's words, when no jog may start on this controller;
     warn on stderr about a machine that looks unhomed (soft limits then count from power-up)."""
-    engine = host.engine
-    assert engine is not None
-    may_jog, why = engine.can_jog()
-    if not may_jog and host.model.state is not None:
+    host = gate.host
+    why = gate.jog_refusal()
+    if why is not None and host.model.state is not None:
         raise JogRefusedError(f"jogging refused, the script was not run: {why}")
     if host.model.state == "Idle" and host.model.looks_unhomed():
         print(f"smoothjog: warning: {UNHOMED_WARNING}", file=sys.stderr)
@@ -242,16 +242,16 @@ async def _run(
         rig_t0 = link.rig.now_s if isinstance(link, SimLink) else 0.0
         summary = Summary()
         try:
-            _refuse_at_start(host)
+            gate = MotionGate(host)
+            _refuse_at_start(gate)
             if isinstance(script, DeviceReplay):
                 summary.device = await script.play(host)
             else:
                 for item in script:
                     await asyncio.sleep(max(t0 + item.t_s - loop.time(), 0.0))
                     if _moves(item.intent):
-                        assert host.engine is not None
-                        may_jog, why = host.engine.can_jog()
-                        if not may_jog and why is not None and why not in summary.refused:
+                        why = gate.jog_refusal()
+                        if why is not None and why not in summary.refused:
                             summary.refused.append(why)
                     host.set_intent(item.intent)
             try:
