@@ -12,6 +12,7 @@ from smoothjog.core.engine.clearance import Clearance
 from smoothjog.core.engine.clock import LinkClock
 from smoothjog.core.engine.limits import JOG_STATES, EngineLimits, JogTuning, state_reason
 from smoothjog.core.engine.lines import EngineLines, others_poll
+from smoothjog.core.engine.parts import MotionParts
 from smoothjog.core.engine.records import (
     EngineEvent,
     EngineStats,
@@ -23,9 +24,9 @@ from smoothjog.core.engine.records import (
 from smoothjog.core.engine.reports import ReportReader
 from smoothjog.core.engine.restart import RestartWatch
 from smoothjog.core.engine.signs import Evidence, Reaction, Signs, Stage, stop_off_path, who_stopped
-from smoothjog.core.engine.steps import StepParts, StepQueue
+from smoothjog.core.engine.steps import StepQueue
 from smoothjog.core.engine.stopper import StopDriver, StopParts, StopPhase
-from smoothjog.core.engine.stream import Streamer, StreamParts, still
+from smoothjog.core.engine.stream import Streamer, still
 from smoothjog.core.engine.tracker import PathTracker
 from smoothjog.core.intents import (
     ContinuousIntent,
@@ -84,14 +85,11 @@ class PhaseCore:
             StopParts(*parts, self.lines, self.clock, self.reports, self.notices, self.stats),
             limits,
         )
-        self.stream = Streamer(
-            StreamParts(*parts, self.clock, self.clearance, self.lines, self.notices, self.stats),
-            limits,
+        movers = MotionParts(
+            *parts, self.clock, self.clearance, self.lines, self.notices, self.stats
         )
-        self.steps = StepQueue(
-            StepParts(*parts, self.clock, self.clearance, self.lines, self.notices, self.stats),
-            limits,
-        )
+        self.stream = Streamer(movers, limits)
+        self.steps = StepQueue(movers, limits)
         #: Set by the host just before a banner that follows a Ctrl-X it sent for the user:
         #: that reset is told as news ("info"), not as a fault.
         self.reset_expected = False

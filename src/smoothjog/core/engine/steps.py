@@ -13,15 +13,12 @@ from dataclasses import dataclass
 from decimal import Decimal
 
 from smoothjog.core import increments as inc
-from smoothjog.core.engine.clearance import Clearance
-from smoothjog.core.engine.clock import LinkClock
-from smoothjog.core.engine.limits import EngineLimits, JogTuning
-from smoothjog.core.engine.lines import EngineLines
-from smoothjog.core.engine.records import EngineStats, Notices, Output
-from smoothjog.core.engine.tracker import PathSeg, PathTracker
+from smoothjog.core.engine.limits import EngineLimits
+from smoothjog.core.engine.parts import MotionParts
+from smoothjog.core.engine.records import Output
+from smoothjog.core.engine.tracker import PathSeg
 from smoothjog.core.intents import GotoIntent, HandwheelIntent, StepIntent
 from smoothjog.core.jogline import MM_DECIMALS, build_jog_line, format_number
-from smoothjog.core.machine import MachineModel
 from smoothjog.core.units import mm_min_to_mm_s, mm_s_to_mm_min, norm
 
 
@@ -67,27 +64,13 @@ class WheelPlan:
     clipped: bool
 
 
-@dataclass
-class StepParts:
-    """What the step queue reads and writes beside its own queue."""
-
-    model: MachineModel
-    tuning: JogTuning
-    track: PathTracker
-    clock: LinkClock
-    clearance: Clearance
-    lines: EngineLines
-    notices: Notices
-    stats: EngineStats
-
-
 Queued = StepIntent | GotoIntent | WheelRun
 
 
 class StepQueue:
     """Steps, go-tos and handwheel runs waiting to be sent, in order."""
 
-    def __init__(self, parts: StepParts, limits: EngineLimits) -> None:
+    def __init__(self, parts: MotionParts, limits: EngineLimits) -> None:
         """An empty queue."""
         self.parts = parts
         self.limits = limits

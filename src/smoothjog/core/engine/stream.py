@@ -11,16 +11,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from smoothjog.core import increments as inc
-from smoothjog.core.engine.clearance import MIN_BLOCK_STEPS, Clearance, Suspect
-from smoothjog.core.engine.clock import LinkClock
-from smoothjog.core.engine.limits import EngineLimits, JogTuning
-from smoothjog.core.engine.lines import EngineLines
-from smoothjog.core.engine.records import EngineStats, Notices, Output
-from smoothjog.core.engine.tracker import PathSeg, PathTracker
+from smoothjog.core.engine.clearance import MIN_BLOCK_STEPS, Suspect
+from smoothjog.core.engine.limits import EngineLimits
+from smoothjog.core.engine.parts import MotionParts
+from smoothjog.core.engine.records import Output
+from smoothjog.core.engine.tracker import PathSeg
 from smoothjog.core.errors import JogBuildError
 from smoothjog.core.intents import ContinuousIntent, Intent
 from smoothjog.core.jogline import MM_DECIMALS, build_jog_line, format_number
-from smoothjog.core.machine import MachineModel
 from smoothjog.core.units import Vec, g91_end, mm_min_to_mm_s, mm_s_to_mm_min, norm
 
 #: Grbl's slowest feed (MINIMUM_FEED_RATE, 1 mm/min, firmware-facts §4.2), in mm/s.
@@ -61,20 +59,6 @@ class Cruise:
     lines: int = 0  # repeats sent (the run is worked out afresh after CRUISE_LINES)
 
 
-@dataclass
-class StreamParts:
-    """What the streamer reads and writes beside its own queue."""
-
-    model: MachineModel
-    tuning: JogTuning
-    track: PathTracker
-    clock: LinkClock
-    clearance: Clearance
-    lines: EngineLines
-    notices: Notices
-    stats: EngineStats
-
-
 def still(axes: int) -> inc.VectorMove:
     """The commanded move of an engine at rest."""
     return inc.VectorMove((0.0,) * axes, 0.0, 1.0)
@@ -83,7 +67,7 @@ def still(axes: int) -> inc.VectorMove:
 class Streamer:
     """Continuous jogging: the velocity a stick asks for, the queue's size and its lines."""
 
-    def __init__(self, parts: StreamParts, limits: EngineLimits) -> None:
+    def __init__(self, parts: MotionParts, limits: EngineLimits) -> None:
         """Nothing streamed yet."""
         self.parts = parts
         self.limits = limits
