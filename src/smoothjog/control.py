@@ -30,7 +30,7 @@ from smoothjog.core.firmware import for_model
 from smoothjog.core.ledger import CONSOLE
 from smoothjog.core.realtime import OVERRIDE_KINDS, OVERRIDE_STEPS, OVERRIDES
 from smoothjog.core.responses import ErrorReply
-from smoothjog.core.states import LineKind, line_kind, moves
+from smoothjog.core.states import LineKind, is_homing, line_kind, moves
 from smoothjog.host import Host
 from smoothjog.links.base import encode_line
 
@@ -329,7 +329,7 @@ class MachineControl:
     async def _running(self, name: str) -> AsyncIterator[None]:
         """Mark a command as running for its whole length; refuse it when it may not run."""
         self._require(name)
-        self.gate.begin(name, command(name).doing)
+        self.gate.begin(command(name).doing)
         try:
             yield
         finally:
@@ -360,7 +360,7 @@ class MachineControl:
         try:
             if kind is LineKind.SYSTEM and "=" in text:
                 await host.reread_settings()
-            elif kind is LineKind.GCODE or text.upper().startswith("$H"):
+            elif kind is LineKind.GCODE or is_homing(text):
                 await host.console("$G", timeout_s=LINE_TIMEOUT_S)
                 if host.model.state in ("Idle", "Alarm"):
                     # `$#` is answered only at rest (firmware-facts §5.3).

@@ -25,7 +25,6 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
-import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
@@ -64,7 +63,7 @@ from smoothjog.core.responses import (
     VersionInfo,
     parse_response,
 )
-from smoothjog.core.states import REST_STATES, SUSPENDED_STATES
+from smoothjog.core.states import REST_STATES, SUSPENDED_STATES, is_homing
 from smoothjog.handshake import (
     ControllerSuspendedError,
     HandshakeResult,
@@ -154,10 +153,6 @@ RESET_PENDING_S = 2.0
 
 #: The jog-lock source of settings that could not be read (Host.set_jog_lock).
 SETTINGS_LOCK = "settings"
-
-#: A line that starts a homing cycle, once spaces are gone and letters are capitals (Grbl's
-#: line filter, firmware-facts §1.1): `$H`, or one axis (`$HX`, HOMING_SINGLE_AXIS_COMMANDS).
-_HOMING_LINE = re.compile(r"\$H[A-Z]?", re.ASCII)
 
 
 class ResetNeededError(ConnectError):
@@ -633,7 +628,7 @@ class Host:
 
     def _note_homing(self, entry: Entry) -> None:
         """A `$H` line (anyone's) is on its way: the model shows Home until its reply."""
-        if entry.owner != ENGINE and _HOMING_LINE.fullmatch("".join(entry.text.split()).upper()):
+        if entry.owner != ENGINE and is_homing(entry.text):
             self._homing_entry = entry
             self.model.homing_sent()
             self._poke()  # the engine polls `?` at the moving rate from now on

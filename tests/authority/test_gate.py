@@ -222,7 +222,7 @@ def test_a_settings_dump_waits_for_a_move_the_report_has_not_shown(session: Sess
 
 def test_a_reset_goes_while_a_line_waits_for_its_reply(session: Session) -> None:
     vh = session.vh
-    session.gate.begin("home", "homing")  # a command in flight
+    session.gate.begin("homing")  # a command in flight
     assert session.gate.command_refusal("reset") is None
     assert session.gate.command_refusal("unlock") == "wait: homing has not finished"
     session.gate.end()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from smoothjog.core.states import LineKind, line_kind, line_refusal, moves
+from smoothjog.core.states import LineKind, is_homing, line_kind, line_refusal, moves
 
 
 @pytest.mark.parametrize(
@@ -77,3 +77,11 @@ def test_the_line_table_follows_the_firmware(
     else:
         assert why is not None
         assert refused in why
+
+
+@pytest.mark.parametrize(
+    ("line", "homing"),
+    [("$H", True), ("$h", True), ("$ H X", True), ("$HZ", True), ("$HX1", False), ("$#", False)],
+)
+def test_homing_lines_are_known_as_grbl_reads_them(line: str, homing: bool) -> None:
+    assert is_homing(line) is homing

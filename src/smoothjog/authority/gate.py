@@ -78,8 +78,7 @@ class MotionGate:
         self.host = host
         #: The machine command in flight, in words ("homing"), or None.
         self.running: str | None = None
-        self._running_name: str | None = None
-        #: When a line that may move the machine (a console G0, `$H`) was sent, until a report
+        #: When a G-code line that may move the machine (a console G0) was sent, until a report
         #: after its reply shows the machine settled; None when no such motion is known.
         self._motion_sent_s: float | None = None
         self._motion_answered_s: float | None = None
@@ -91,7 +90,7 @@ class MotionGate:
     def attach(self, host: Host) -> None:
         """Gate a new host (the link was lost and opened again)."""
         self.host = host
-        self.running = self._running_name = None
+        self.running = None
         self._motion_sent_s = self._motion_answered_s = None
         host.add_line_listener(self._on_line)
 
@@ -129,10 +128,9 @@ class MotionGate:
 
     def machine_moving(self) -> bool:
         """True while anything may still move the machine: the engine, a line, a program."""
-        host = self.host
-        if host.driver is not None and host.busy():
+        if self.engine_moving():
             return True
-        return host.model.state in MOVING_STATES or self._motion_sent_s is not None
+        return self.host.model.state in MOVING_STATES or self._motion_sent_s is not None
 
     def engine_moving(self) -> bool:
         """True while smoothjog's own engine has anything in hand (a jog, steps, its stop)."""
@@ -178,18 +176,18 @@ class MotionGate:
         return _state_refusal(name, state)
 
     # -------------------------------------------------------------- commands in flight
-    def begin(self, name: str, doing: str) -> None:
-        """A machine command starts (MachineControl asked command_refusal first)."""
-        self.running, self._running_name = doing, name
+    def begin(self, doing: str) -> None:
+        """A machine command starts, doing what it says (MachineControl asked first)."""
+        self.running = doing
 
     def end(self) -> None:
         """The machine command in flight ended."""
-        self.running = self._running_name = None
+        self.running = None
 
     def motion_line_sent(self, text: str) -> None:
-        """A line that may move the machine went out (a console line, `$H`)."""
-        kind = line_kind(text)
-        if (kind is LineKind.GCODE and line_moves(text)) or text.strip().upper().startswith("$H"):
+        """A G-code line that may move the machine went out (a `$H` shows as Home in the model
+        until its reply, Host._note_homing)."""
+        if line_kind(text) is LineKind.GCODE and line_moves(text):
             self._motion_sent_s = self.host.now_s()
             self._motion_answered_s = None
 
@@ -235,7 +233,7 @@ class MotionGate:
         # Always: a stop also drops queued steps and ends a held jog the engine merely holds.
         host.set_intent(StopIntent())
         state = host.model.state
-        if self._running_name == "home" or state == "Home":
+        if state == "Home":  # the model shows Home while anyone's `$H` waits for its reply
             host.send_realtime(CONSOLE, realtime.RESET)
             actions.append("reset")
         elif state == "Run" or self._other_motion():

@@ -163,7 +163,7 @@ def _moves(intent: Intent) -> bool:
     if isinstance(intent, StopIntent):
         return False
     if isinstance(intent, ContinuousIntent):
-        return any(value != 0 for value in intent.axes.values())
+        return not intent.is_neutral()
     return True
 
 

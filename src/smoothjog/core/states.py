@@ -59,6 +59,7 @@ ACCEPTED_IN: Final[dict[LineKind, frozenset[str]]] = {
 }
 
 _STARTUP = re.compile(r"^\$N[0-9]=", re.ASCII)
+_HOMING = re.compile(r"\$H[A-Z]?", re.ASCII)
 #: A G-code word that moves the machine (G0-G3, probing, G28/G30, canned motion).
 _MOTION_WORD = re.compile(r"G0*[0-3](?![0-9.])|G38|G28(?!\.1)|G30(?!\.1)|G8[0-9]", re.I)
 #: An axis word: it moves in the modal motion mode (G0 by default) unless another word takes it.
@@ -85,6 +86,12 @@ def line_kind(text: str) -> LineKind:
     if _STARTUP.match(line):
         return LineKind.STORE_STARTUP
     return LineKind.SYSTEM
+
+
+def is_homing(text: str) -> bool:
+    """True for a line that starts a homing cycle: `$H`, or one axis (`$HX`,
+    HOMING_SINGLE_AXIS_COMMANDS), spaces and case as Grbl's line filter leaves them (§1.1)."""
+    return _HOMING.fullmatch("".join(text.split()).upper()) is not None
 
 
 def moves(text: str) -> bool:
@@ -128,6 +135,7 @@ __all__ = [
     "SLEEP_TEXT",
     "SUSPENDED_STATES",
     "LineKind",
+    "is_homing",
     "line_kind",
     "line_refusal",
     "moves",
