@@ -157,6 +157,11 @@ def test_stop_feed_holds_a_console_move(session: Session) -> None:
     assert x_mm(vh) == moved
     assert start - moved > 1.0
     assert session.control.gate.command_refusal("resume") is None
+    from smoothjog.web.session_backend import SessionBackend
+
+    control = SessionBackend(vh.host, control=session.control).view()["control"]
+    assert isinstance(control, dict)
+    assert control["offer"] == ["resume", "reset"]
 
 
 def test_stop_feed_holds_a_console_move_the_last_report_does_not_show_yet(

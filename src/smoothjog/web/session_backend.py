@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
-from smoothjog.authority.commands import COMMAND_NAMES
+from smoothjog.authority.commands import COMMAND_NAMES, command
 from smoothjog.authority.gate import MotionGate, StopRecord
 from smoothjog.control import WCS_WORDS, CommandResult, MachineControl
 from smoothjog.core.codes import describe_alarm
@@ -100,7 +100,7 @@ class SessionBackend:
         """The one next action(s) the page offers beside the message, by state."""
         session = self.session
         state = self.gate.shown_state()
-        if state in ("Hold", "Door"):
+        if state in (command("resume").states or ()):  # Hold, Door: the catalogue's
             return ["resume", "reset"]
         if state == "Sleep" or (state == "Alarm" and session.reset_needed):
             return ["reset"]
