@@ -651,10 +651,9 @@ class Host:
         until a reset fail now, in words, rather than at their timeout."""
         if not self.model.reset_needed:
             return  # the controller goes on reading lines: their replies come
-        for entry in self.ledger.outstanding(CONSOLE):
-            future = entry.tag
-            if isinstance(future, asyncio.Future) and not future.done():
-                future.set_exception(ResetNeededError(alarm.code, entry.text))
+        _fail_console_entries(
+            self.ledger.outstanding(CONSOLE), lambda entry: ResetNeededError(alarm.code, entry.text)
+        )
 
     def _on_relay_moved(self) -> None:
         """The relay saw the controller change (another client moved it): ask for a report."""
@@ -1035,11 +1034,17 @@ def _resolve_console_reply(entry: Entry, resp: Ok | ErrorReply, now_s: float) ->
         future.set_result(resp)
 
 
-def _fail_console_entries(entries: list[Entry]) -> None:
-    """Console lines lost to a reset: their query() gets an error instead of a hang."""
+def _lost_to_reset(entry: Entry) -> Exception:
+    """What a console line's query() gets when a reset dropped the line."""
+    return ConnectError(f"the controller reset before it answered {entry.text!r}")
+
+
+def _fail_console_entries(
+    entries: Sequence[Entry], error: Callable[[Entry], Exception] = _lost_to_reset
+) -> None:
+    """Console lines that will never be answered (lost to a reset, or left by a critical
+    alarm): their query() gets error(entry) instead of a hang."""
     for entry in entries:
         future = entry.tag
         if entry.owner == CONSOLE and isinstance(future, asyncio.Future) and not future.done():
-            future.set_exception(
-                ConnectError(f"the controller reset before it answered {entry.text!r}")
-            )
+            future.set_exception(error(entry))

@@ -1076,7 +1076,7 @@ GATE_TEXTS = (
 )
 #: Where a link says it was lost or closed, and where a console line fails, mid-session.
 LINK_LOST = ("_lost", "close")
-CONSOLE_FAILED = ("_ask", "_fail_console_entries")
+CONSOLE_FAILED = ("_ask", "_lost_to_reset")
 
 
 @cache
